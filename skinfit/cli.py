@@ -1,0 +1,160 @@
+"""The ``skinfit`` command line: a thin layer over the library."""
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from .errors import InputError
+
+__all__ = ["main"]
+
+
+def _cmd_models(args):
+    from .models import list_models, load_model
+
+    rows = []
+    for mid in list_models():
+        m = load_model(mid)
+        rows.append({"id": m.id, "title": m.title, "source": m.source,
+                     "observables": [f"{o.name} [{o.unit}]" for o in m.observables],
+                     "covariates": [f"{c.name} [{c.unit}]" for c in m.covariates],
+                     "parameters": [f"{p.name} [{p.unit}]" for p in m.parameters],
+                     "variants": list(m.variants)})
+    if args.json:
+        return print(json.dumps(rows, indent=2))
+    for r in rows:
+        print(f"{r['id']}: {r['title']}\n  source: {r['source']}\n  observes: {', '.join(r['observables'])}"
+              f"\n  covariates: {', '.join(r['covariates'])}\n  parameters: {', '.join(r['parameters'])}"
+              + (f"\n  competes with: {', '.join(r['variants'])}" if r["variants"] else "") + "\n")
+
+
+def _cmd_priors(args):
+    from .models import load_model
+    from .priors import load_priors
+
+    priors = load_priors(args.model)
+    units = {}
+    try:
+        m = load_model(priors.model)
+        units = {p.name: p.unit for p in m.parameters}
+    except InputError:
+        pass
+    rows = [{"parameter": n, "unit": units.get(n, "(noise, observable's unit)"), "prior": p.describe(),
+             "source": p.source} for n, p in priors.priors.items()]
+    if args.json:
+        return print(json.dumps(rows, indent=2))
+    print(f"priors for {priors.model} ({priors.path}), SI units, each truncated to its bounds:\n")
+    for r in rows:
+        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['source']}")
+
+
+def _cmd_datasets(args):
+    from .data import list_datasets, load_dataset
+
+    rows = []
+    for did in list_datasets():
+        ds = load_dataset(did)
+        rows.append({"id": ds.id, "title": ds.title, "rows": len(ds), "model": ds.model,
+                     "provenance": ds.provenance.get("kind"), "groups": list(ds.groups),
+                     "columns": {c.name: c.unit or "category" for c in ds.columns}})
+    if args.json:
+        return print(json.dumps(rows, indent=2))
+    for r in rows:
+        cols = ", ".join(f"{k} [{v}]" for k, v in r["columns"].items())
+        print(f"{r['id']} ({r['provenance']}, {r['rows']} rows, for {r['model']}): {r['title']}\n"
+              f"  columns (units as stored; converted to SI on load): {cols}\n")
+
+
+def _parse_split(items):
+    out = {}
+    for item in items or []:
+        name, sep, cols = item.partition("=")
+        if not sep or not cols:
+            raise InputError("--split", f"expected PARAMETER=COLUMN[,COLUMN] (got {item!r})")
+        out[name] = cols.split(",")
+    return out
+
+
+def _cmd_fit(args):
+    from .fit import fit
+
+    out = Path(args.out)
+    split = _parse_split(args.split) or None
+    t0 = time.perf_counter()
+    result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
+                 noise=args.noise, progress=not args.quiet, strict=args.strict,
+                 ess_target=args.ess, max_steps=args.max_steps)
+    path = result.save(out / "fit.nc")
+    (out / "summary.csv").write_text(result.summary().to_csv())
+    print(result.report_text())
+    print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
+    return 0 if result.converged or not args.strict else 3
+
+
+def _cmd_demo(args):
+    from .fit import fit
+
+    out = Path(args.out)
+    print("skinfit demo: fitting the shipped SIMULATED electroadhesion dataset "
+          "(datasets/electroadhesion_synthetic) with the electroadhesion model\n")
+    result = fit("electroadhesion", "electroadhesion_synthetic", rng=args.seed, progress=True)
+    path = result.save(out / "electroadhesion" / "fit.nc")
+    print(result.report_text())
+    print(f"\nwritten: {path}")
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="skinfit", description="Bayesian inference for published "
+                                "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("models", help="list the model cards (models/*.toml) with units and sources")
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=_cmd_models)
+    s = sub.add_parser("priors", help="show a model's priors with their literature sources")
+    s.add_argument("model", help="model id or path of a prior file")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_priors)
+    s = sub.add_parser("datasets", help="list the shipped datasets (datasets/*/dataset.toml)")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_cmd_datasets)
+    s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
+    s.add_argument("model", help="model id (models/<id>.toml) or path")
+    s.add_argument("dataset", help="dataset id (datasets/<id>/) or path")
+    s.add_argument("--out", required=True, help="run directory; fit.nc and summary.csv go there")
+    s.add_argument("--priors", help="prior file id or path (default: priors/<model>.toml)")
+    s.add_argument("--seed", type=int, default=None, help="seed: the same seed gives identical samples")
+    s.add_argument("--split", action="append", metavar="PARAM=COLUMN",
+                   help="fit PARAM once per level of COLUMN (repeatable), e.g. alpha=voltage")
+    s.add_argument("--noise", choices=["normal", "student_t", "lognormal"], help="noise model override")
+    s.add_argument("--ess", type=float, default=400, help="minimum effective sample size (default 400)")
+    s.add_argument("--max-steps", type=int, default=20000, help="emcee step cap (default 20000)")
+    s.add_argument("--strict", action="store_true", help="exit non-zero if not converged")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_fit)
+    s = sub.add_parser("demo", help="fit the shipped datasets and print the results")
+    s.add_argument("--out", default="runs/demo", help="where results go (default runs/demo)")
+    s.add_argument("--seed", type=int, default=1)
+    s.set_defaults(func=_cmd_demo)
+    return p
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    warnings.simplefilter("default")
+    try:
+        code = args.func(args)
+    except InputError as exc:
+        print(f"skinfit: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("skinfit: interrupted", file=sys.stderr)
+        return 130
+    return code or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

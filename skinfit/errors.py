@@ -1,0 +1,32 @@
+"""The one error type for bad user input, and the warnings skinfit emits."""
+
+__all__ = ["InputError", "ConvergenceWarning", "SupportWarning"]
+
+
+class InputError(ValueError):
+    """A user file or argument is invalid.
+
+    The message names the file, the field or column, the row (1-based data row, header
+    excluded) when there is one, and what was expected, e.g.
+    ``datasets/x/data.csv: column 'normal_force', row 7: expected a force >= 0 (got -0.3 mN)``.
+    """
+
+    def __init__(self, where, what, *, field=None, row=None):
+        self.where = str(where)
+        self.field = field
+        self.row = row
+        self.what = what
+        loc = self.where
+        if field is not None:
+            loc += f": {field}"
+        if row is not None:
+            loc += f", row {row}"
+        super().__init__(f"{loc}: {what}")
+
+
+class ConvergenceWarning(UserWarning):
+    """A fit did not meet its convergence criteria."""
+
+
+class SupportWarning(UserWarning):
+    """A prediction was requested at a parameter point outside the model's physical support."""

@@ -1,0 +1,358 @@
+"""``skinfit.fit``: MAP (nlopt) -> emcee from the Laplace ball -> diagnostics -> a Fit.
+
+A :class:`Fit` wraps one ArviZ DataTree (groups posterior, sample_stats, log_likelihood,
+posterior_predictive, observed_data, constant_data, prior) whose root attributes record where
+every number came from: model card, prior file and dataset (with hashes and full texts),
+skinfit and dependency versions, seed, MAP, optimiser status, timings and convergence.
+"""
+
+import json
+import os
+import tempfile
+import time
+import warnings
+from importlib import metadata
+from pathlib import Path
+
+import arviz as az
+import numpy as np
+import pandas as pd
+
+from .data import Dataset, load_dataset
+from .errors import ConvergenceWarning, InputError
+from .models import Model, load_model
+from .optimize import find_map, laplace_covariance
+from .posterior import Posterior
+from .priors import PriorSet, load_priors
+from .sampling import initial_ball, run_emcee
+
+__all__ = ["fit", "Fit", "load_fit", "as_generator"]
+
+_VERSIONED = ("skinfit", "numpy", "scipy", "emcee", "nlopt", "arviz", "arviz-base", "arviz-stats",
+              "xarray", "pandas")
+
+
+def as_generator(rng):
+    """SPEC 7: an int seed, None or a numpy Generator -> a numpy Generator."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or isinstance(rng, (int, np.integer)):
+        return np.random.default_rng(rng)
+    raise TypeError(f"rng must be an int seed, None or numpy.random.Generator (got {type(rng).__name__})")
+
+
+def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, constants=None,
+        nwalkers=None, ess_target=400, max_steps=20000, progress=False, strict=False,
+        n_global=2000, n_local=4, n_prior_draws=2000, backend=None):
+    """Fit ``model`` to ``dataset``: MAP by nlopt, then emcee until converged.
+
+    Parameters
+    ----------
+    model : Model or str
+        A model or a model id (``models/<id>.toml``).
+    dataset : Dataset or str
+        A dataset or dataset id / path.
+    priors : PriorSet or str, optional
+        Default: ``priors/<model id>.toml``.
+    rng : int, None or numpy.random.Generator
+        The one source of randomness (SPEC 7); the same seed gives identical samples.
+    split : mapping parameter -> column(s), optional
+        Parameters fitted once per level of a grouping column (default: the card's ``[split]``).
+    noise : str or mapping observable -> str, optional
+        ``normal`` (default), ``student_t`` or ``lognormal``.
+    ess_target : float
+        Minimum effective sample size per parameter to call the run converged.
+    strict : bool
+        Raise instead of warn when the run does not meet its convergence criteria.
+
+    Returns
+    -------
+    Fit
+    """
+    t_start = time.perf_counter()
+    model = model if isinstance(model, Model) else load_model(model)
+    dataset = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    seed = rng if isinstance(rng, (int, np.integer)) else None
+    rng = as_generator(rng)
+    post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
+
+    map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
+    z_map = post.to_z(map_result.theta[None])[0]
+    cov = laplace_covariance(post, z_map)
+    nwalkers = nwalkers or max(32, 2 * ((4 * post.ndim + 1) // 2))
+    p0 = initial_ball(post, z_map, cov, nwalkers, rng)
+    run = run_emcee(post, p0, rng, ess_target=ess_target, max_steps=max_steps, progress=progress,
+                    backend=backend)
+    if not run.converged:
+        msg = f"{model.id} on {dataset.id}: not converged after {run.n_steps} steps: " + "; ".join(run.reasons)
+        if strict:
+            raise RuntimeError(msg)
+        warnings.warn(msg, ConvergenceWarning, stacklevel=2)
+    idata = _build_tree(post, run, map_result, rng, n_prior_draws,
+                        seed=seed, seconds_total=time.perf_counter() - t_start)
+    return Fit(idata, posterior=post)
+
+
+def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_total):
+    nw, nd, d = run.chain.shape
+    theta = post.to_theta(run.chain.reshape(-1, d))
+    ll, pred, _ = post.pointwise(theta)
+    lp_nat = post.log_prior(theta) + sum(v.sum(axis=1) for v in ll.values())
+    t_prior = post.sample_prior(n_prior_draws, rng)
+    posterior, prior_group, dims, coords = {}, {}, {}, {"obs_id": np.arange(post.n)}
+    for pname in list(post.model.parameter_names) + list(post.noise_names):
+        cols = [j for j, s in enumerate(post.slots) if s.base == pname]
+        if pname in post.levels:
+            dim = ",".join(post.levels[pname][0])
+            coords[dim] = list(post.levels[pname][1])
+            dims[pname] = [dim]
+            posterior[pname] = theta[:, cols].reshape(nw, nd, len(cols))
+            prior_group[pname] = t_prior[:, cols].reshape(1, n_prior_draws, len(cols))
+        else:
+            posterior[pname] = theta[:, cols[0]].reshape(nw, nd)
+            prior_group[pname] = t_prior[:, cols[0]].reshape(1, n_prior_draws)
+    ppc = {}
+    for o in post.observables:
+        mu = pred[o] if np.ndim(pred[o]) == 2 else np.broadcast_to(pred[o], (len(theta), post.n))
+        suffix = "" if len(post.observables) == 1 else f"_{o}"
+        sigma = post.unpack(theta)[f"sigma{suffix}"]
+        eps = rng.standard_normal(mu.shape)
+        if post.noise[o] == "student_t":
+            nu = post.unpack(theta)[f"nu{suffix}"]
+            eps = rng.standard_t(np.broadcast_to(nu, mu.shape))
+        ppc[o] = (np.exp(np.log(mu) + sigma * eps) if post.noise[o] == "lognormal"
+                  else mu + sigma * eps).reshape(nw, nd, post.n)
+        dims[o] = ["obs_id"]
+    loglik = {o: v.reshape(nw, nd, post.n) for o, v in ll.items()}
+    constant = {c: np.asarray(v) for c, v in post.x.items()}
+    for c in post.dataset.frame.columns:
+        if c not in constant and c not in post.observables:
+            col = post.dataset.frame[c]
+            constant[c] = col.to_numpy(dtype=object if col.dtype == object or str(col.dtype).startswith("str") else float)
+    for c in constant:
+        dims[c] = ["obs_id"]
+    ds = post.dataset
+    attrs = {
+        "skinfit_schema": 1,
+        "model_id": post.model.id, "model_sha256": post.model.sha256, "model_card": post.model.card_text,
+        "priors_id": post.priors.id, "priors_sha256": post.priors.sha256, "priors_text": post.priors.text,
+        "dataset_id": ds.id, "dataset_sha256": ds.sha256, "dataset_path": ds.path,
+        "dataset_provenance": json.dumps(dict(ds.provenance), default=str),
+        "units": json.dumps({c.name: c.unit for c in ds.columns if c.unit}),
+        "setup": json.dumps({**post.describe(), "constants": post.constants}),
+        "slots": json.dumps([{"name": s.name, "base": s.base, "level": s.level} for s in post.slots]),
+        "seed": -1 if seed is None else int(seed),
+        "versions": json.dumps(_versions()),
+        "map": json.dumps(map_result.as_dict(post.names)),
+        "map_log_density": map_result.log_density,
+        "optimizer": json.dumps({"starts": list(map_result.starts), "evaluations": map_result.evaluations}),
+        "sampler": json.dumps({
+            "nwalkers": nw, "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin,
+            "moves": "DEMove 0.8 + DESnookerMove 0.2", "tau": dict(zip(post.names, run.tau.tolist())),
+            "ess_emcee": dict(zip(post.names, run.ess_emcee.tolist())), "rhat_max": run.rhat_max,
+            "acceptance_mean": float(run.acceptance.mean()), "acceptance_min": float(run.acceptance.min()),
+            "converged": run.converged, "reasons": list(run.reasons), "evaluations": run.evaluations}),
+        "timings": json.dumps({"map_s": map_result.seconds, "sampling_s": run.seconds, "total_s": seconds_total}),
+        "support_counts": json.dumps(dict(post.counts), default=int),
+        "support_condition": post.model.support,
+    }
+    observed = {o: post.y[o] for o in post.observables}
+    sample_stats = {"lp": lp_nat.reshape(nw, nd),
+                    "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
+    return az.from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
+                         "log_likelihood": loglik, "posterior_predictive": ppc,
+                         "observed_data": observed, "constant_data": constant},
+                        dims=dims, coords=coords, attrs={"/": attrs})
+
+
+def _versions():
+    out = {}
+    for pkg in _VERSIONED:
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+class Fit:
+    """The result of :func:`fit`: an ArviZ DataTree plus convenience views.
+
+    ``fit.idata`` is the DataTree; ``fit.summary()`` a table; ``fit.save(path)`` writes NetCDF.
+    """
+
+    def __init__(self, idata, posterior=None):
+        self.idata = idata
+        self._posterior = posterior
+
+    # ---- provenance ---------------------------------------------------------------------
+    def attr(self, key):
+        value = self.idata.attrs[key]
+        return json.loads(value) if isinstance(value, str) and value[:1] in "{[" else value
+
+    @property
+    def model_id(self):
+        return self.idata.attrs["model_id"]
+
+    @property
+    def dataset_id(self):
+        return self.idata.attrs["dataset_id"]
+
+    @property
+    def map(self):
+        return self.attr("map")
+
+    @property
+    def converged(self):
+        return bool(self.attr("sampler")["converged"])
+
+    @property
+    def posterior(self):
+        """The :class:`~skinfit.posterior.Posterior` behind the fit, rebuilt from the saved tree."""
+        if self._posterior is None:
+            self._posterior = rebuild_posterior(self.idata)
+        return self._posterior
+
+    # ---- tables -------------------------------------------------------------------------
+    def summary(self):
+        """Per parameter: mean, sd, 3%/97% HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
+
+        ``contraction`` is 1 - var_posterior / var_prior: near 1 the data determined the
+        parameter, near 0 its posterior is its prior (``note`` says so).
+        """
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            table = az.summary(self.idata, ci_kind="hdi", ci_prob=0.94, round_to="none",
+                               var_names=[v for v in self.idata["posterior"].data_vars])
+        table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
+        table.index = [_slot_name(i) for i in table.index]
+        sampler = self.attr("sampler")
+        post_ds = self.idata["posterior"].to_dataset()
+        prior_ds = self.idata["prior"].to_dataset() if "prior" in self.idata.children else None
+        priors = _priors_from_attrs(self.idata)
+        rows = {s["name"]: s for s in self.attr("slots")}
+        contraction, notes = [], []
+        for name in table.index:
+            slot = rows[name]
+            values = _slot_values(post_ds, slot)
+            var_prior = priors[slot["base"]].moments()[1] if slot["base"] in priors else np.nan
+            c = 1.0 - float(np.var(values)) / var_prior if var_prior > 0 else np.nan
+            contraction.append(c)
+            notes.append("prior-dominated: the data barely inform it" if c < 0.2 else "")
+        del prior_ds
+        table["map"] = [self.map[n] for n in table.index]
+        table["tau"] = [sampler["tau"][n] for n in table.index]
+        table["contraction"] = contraction
+        table["note"] = notes
+        return table[["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
+                      "contraction", "note"]]
+
+    def diagnostics(self):
+        """Sampler, optimiser and support diagnostics as one dict."""
+        return {"sampler": self.attr("sampler"), "optimizer": self.attr("optimizer"),
+                "timings": self.attr("timings"), "support_counts": self.attr("support_counts"),
+                "support_condition": self.idata.attrs.get("support_condition", "")}
+
+    def report_text(self):
+        """The text printed by ``skinfit fit``: summary table and diagnostics."""
+        s = self.attr("sampler")
+        t = self.attr("timings")
+        c = self.attr("support_counts")
+        lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.idata.attrs['dataset_sha256'][:12]})",
+                 f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
+                 f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
+                 f"acceptance mean {s['acceptance_mean']:.3f} (min {s['acceptance_min']:.3f})  "
+                 f"max R-hat over walkers {s['rhat_max']:.4f}",
+                 f"wall time: MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, total {t['total_s']:.2f} s",
+                 f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
+                 f"outside the physical support {c['outside_support']}"
+                 + (f" ({self.idata.attrs.get('support_condition')})" if c["outside_support"] else ""),
+                 ""]
+        with pd.option_context("display.width", 200, "display.max_columns", 20,
+                               "display.float_format", "{:.4g}".format):
+            lines.append(self.summary().to_string())
+        return "\n".join(lines)
+
+    def save(self, path):
+        """Write the fit as NetCDF, atomically (temporary file + rename)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".nc.tmp")
+        os.close(fd)
+        try:
+            self.idata.to_netcdf(tmp, engine="h5netcdf")
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return path
+
+    def __repr__(self):
+        return f"Fit({self.model_id!r} on {self.dataset_id!r}, converged={self.converged})"
+
+
+def load_fit(path):
+    """Load a fit saved by :meth:`Fit.save`."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "fit.nc"
+    if not path.exists():
+        raise InputError(path, "no such fit file")
+    try:
+        tree = az.from_netcdf(path)
+    except (OSError, ValueError) as exc:
+        raise InputError(path, f"not a readable skinfit result ({exc})") from None
+    if "model_id" not in tree.attrs:
+        raise InputError(path, "not a skinfit result (no model_id attribute)")
+    return Fit(tree.load())
+
+
+def _slot_name(label):
+    return label.replace("'", "")
+
+
+def _slot_values(post_ds, slot):
+    da = post_ds[slot["base"]]
+    if slot["level"] is not None:
+        dim = [d for d in da.dims if d not in ("chain", "draw")][0]
+        da = da.sel({dim: slot["level"]})
+    return da.values.ravel()
+
+
+def _priors_from_attrs(tree):
+    import tomllib
+
+    from .priors import parse_prior
+
+    doc = tomllib.loads(tree.attrs["priors_text"])
+    return {k: parse_prior(k, v, "saved priors") for k, v in doc.items()
+            if k not in ("schema_version", "model", "id")}
+
+
+def rebuild_posterior(tree):
+    """Reconstruct the Posterior of a saved fit from its own records (cards as saved)."""
+    import tomllib
+    from types import MappingProxyType
+
+    from .data import Column
+    from .models import _parse_model_text
+    from .priors import PriorSet
+
+    attrs = tree.attrs
+    model = _parse_model_text(attrs["model_card"], f"model card saved in fit ({attrs['model_id']})",
+                              attrs["model_sha256"])
+    priors = PriorSet(id=attrs["priors_id"], model=attrs["model_id"],
+                      priors=MappingProxyType(_priors_from_attrs(tree)), path="saved priors",
+                      sha256=attrs["priors_sha256"], text=attrs["priors_text"])
+    setup = json.loads(attrs["setup"])
+    units = json.loads(attrs["units"])
+    cd = tree["constant_data"].to_dataset()
+    od = tree["observed_data"].to_dataset()
+    frame = pd.DataFrame({c: cd[c].values for c in cd.data_vars} | {o: od[o].values for o in od.data_vars})
+    columns = tuple(Column(c, c, units.get(c), "quantity" if c in units else "category") for c in frame.columns)
+    ds = Dataset(id=attrs["dataset_id"], title="", frame=frame, columns=columns, groups=(),
+                 provenance=MappingProxyType(json.loads(attrs["dataset_provenance"])), model=None,
+                 path=attrs["dataset_path"], sha256=attrs["dataset_sha256"])
+    return Posterior(model, priors, ds, split=setup["split"], noise=setup["noise"],
+                     constants={k: v for k, v in setup["constants"].items() if k in model.constants})

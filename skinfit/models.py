@@ -1,0 +1,254 @@
+"""Model cards (models/<id>.toml) and the registry of forward functions.
+
+A card names its forward function as ``module:function``; only functions listed in the
+``__all__`` of a module of :mod:`skinfit.physics` can be named (nothing in a card is
+evaluated as code).
+"""
+
+import importlib
+import warnings
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+
+from ._toml import ROOT, available, find_file, read_toml, require, sha256_file
+from .errors import InputError, SupportWarning
+
+__all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "NOISE_MODELS"]
+
+NOISE_MODELS = ("normal", "student_t", "lognormal")
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A named observable, covariate or parameter of a model card."""
+
+    name: str
+    unit: str
+    description: str = ""
+    noise: str | None = None  # observables only
+    optional: bool = False  # covariates only: NaN allowed by design
+
+
+def resolve_forward(ref, where="forward"):
+    """Look up ``"skinfit.physics.<module>:<function>"`` in the physics registry."""
+    module_name, _, func_name = ref.partition(":")
+    if not module_name.startswith("skinfit.physics.") or not func_name:
+        raise InputError(where, f"expected 'skinfit.physics.<module>:<function>' (got {ref!r})",
+                         field="forward")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError:
+        raise InputError(where, f"no physics module {module_name!r}", field="forward") from None
+    if func_name not in getattr(module, "__all__", ()):
+        raise InputError(where, f"{module_name} exports no model function {func_name!r} "
+                         f"(available: {', '.join(getattr(module, '__all__', ()))})", field="forward")
+    return getattr(module, func_name)
+
+
+@dataclass(frozen=True)
+class Model:
+    """A published model: its forward function and what its card says about it."""
+
+    id: str
+    title: str
+    source: str
+    forward_ref: str
+    observables: tuple
+    covariates: tuple
+    parameters: tuple
+    constants: MappingProxyType
+    constant_sources: MappingProxyType
+    variants: tuple = ()
+    support: str = ""
+    split: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    plot: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    path: str = ""
+    sha256: str = ""
+    card_text: str = ""
+
+    @property
+    def forward(self):
+        return _forward_cached(self.forward_ref, self.path)
+
+    @property
+    def parameter_names(self):
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def observable_names(self):
+        return tuple(o.name for o in self.observables)
+
+    @property
+    def covariate_names(self):
+        return tuple(c.name for c in self.covariates)
+
+    def evaluate(self, params, covariates, constants=None):
+        """Raw forward call: ``(y, ok)`` with ``y`` a dict of (k, n) arrays, ``ok`` bool (k, n).
+
+        ``params`` values broadcast to (k, n); ``covariates`` is a mapping of (n,) SI arrays.
+        """
+        c = dict(self.constants)
+        if constants:
+            c.update(constants)
+        y, ok = self.forward(params, covariates, c)
+        return y, ok
+
+    def predict(self, params, data, *, constants=None, return_valid=False):
+        """Predicted observable(s) at the covariates of ``data``.
+
+        Parameters
+        ----------
+        params : mapping name -> float or array of shape (k,)
+            An ensemble of k parameter vectors (SI units); floats give one vector.
+        data : pandas.DataFrame or mapping of (n,) arrays
+            SI covariates, columns named as in the model card.
+
+        Returns
+        -------
+        ndarray of shape (n,) when every parameter is a float, else (k, n); a dict of such
+        arrays (keyed by observable) for a model with several observables.  Points outside the
+        model's physical support are NaN and a :class:`SupportWarning` says so (or pass
+        ``return_valid=True`` to get ``(y, valid)`` instead).
+        """
+        missing = set(self.parameter_names) - set(params)
+        if missing:
+            raise InputError(f"model {self.id}", f"missing parameters {sorted(missing)}",
+                             field="params")
+        scalar = all(np.ndim(v) == 0 for v in params.values())
+        p = {name: np.asarray(params[name], dtype=float).reshape(-1, 1) for name in self.parameter_names}
+        x = {}
+        for cov in self.covariates:
+            if cov.name not in data:
+                raise InputError(f"model {self.id}", f"data has no covariate column {cov.name!r} "
+                                 f"[{cov.unit}]", field="data")
+            x[cov.name] = np.asarray(data[cov.name], dtype=float)
+        n = len(next(iter(x.values()))) if x else len(data)
+        y, ok = self.evaluate(p, x, constants)
+        k = max(v.shape[0] for v in p.values())
+        valid = np.broadcast_to(ok, (k, n))
+        out = {}
+        for name, arr in y.items():
+            arr = np.broadcast_to(arr, (k, n)).astype(float, copy=True)
+            arr[~valid] = np.nan
+            out[name] = arr[0] if scalar else arr
+        valid = valid[0] if scalar else valid
+        if not return_valid and not np.all(valid):
+            warnings.warn(f"{self.id}: {np.size(valid) - np.count_nonzero(valid)} predictions lie "
+                          f"outside the physical support ({self.support}); returned as NaN",
+                          SupportWarning, stacklevel=2)
+        result = out[self.observables[0].name] if len(out) == 1 else out
+        return (result, valid) if return_valid else result
+
+    def __repr__(self):
+        return f"Model({self.id!r}, parameters={list(self.parameter_names)})"
+
+
+def _quantities(doc, key, where, *, observable=False):
+    items = require(doc, key, list, where, default=[] if key == "covariates" else ...)
+    out = []
+    for i, item in enumerate(items):
+        prefix = f"{key}[{i}]."
+        if not isinstance(item, dict):
+            raise InputError(where, "expected a table", field=f"{key}[{i}]")
+        name = require(item, "name", str, where, field_prefix=prefix)
+        unit = require(item, "unit", str, where, field_prefix=prefix)
+        desc = require(item, "description", str, where, field_prefix=prefix, default="")
+        noise = None
+        if observable:
+            noise = require(item, "noise", str, where, field_prefix=prefix, default="normal")
+            if noise not in NOISE_MODELS:
+                raise InputError(where, f"unknown noise model {noise!r} (expected one of "
+                                 f"{', '.join(NOISE_MODELS)})", field=prefix + "noise")
+        optional = require(item, "optional", bool, where, field_prefix=prefix, default=False)
+        out.append(Quantity(name, unit, desc, noise, optional))
+    names = [q.name for q in out]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise InputError(where, f"duplicate names {sorted(dup)}", field=key)
+    return tuple(out)
+
+
+_CACHE = {}
+
+
+def load_model(name):
+    """Load a model card by id (``models/<id>.toml``) or by path.
+
+    >>> load_model("electroadhesion").parameter_names[:3]
+    ('E_star', 'tau0', 'd_air')
+    """
+    path = find_file("models", name)
+    digest = sha256_file(path)
+    key = (str(path.resolve()), digest)
+    if key not in _CACHE:
+        _CACHE[key] = _parse_model(path, digest)
+    return _CACHE[key]
+
+
+def _parse_model(path, digest):
+    _, text = read_toml(path)
+    return _parse_model_text(text, _display(path), digest)
+
+
+def _parse_model_text(text, where, digest):
+    import tomllib
+
+    doc = tomllib.loads(text)
+    constants, sources = {}, {}
+    for cname, spec in require(doc, "constants", dict, where, default={}).items():
+        if isinstance(spec, dict):
+            value = require(spec, "value", float, where, field_prefix=f"constants.{cname}.")
+            sources[cname] = spec.get("source", "")
+        elif isinstance(spec, (int, float)) and not isinstance(spec, bool):
+            value = float(spec)
+        else:
+            raise InputError(where, f"expected a number or {{value=..., unit=..., source=...}} "
+                             f"(got {spec!r})", field=f"constants.{cname}")
+        constants[cname] = value
+    model = Model(
+        id=require(doc, "id", str, where),
+        title=require(doc, "title", str, where),
+        source=require(doc, "source", str, where),
+        forward_ref=require(doc, "forward", str, where),
+        observables=_quantities(doc, "observables", where, observable=True),
+        covariates=_quantities(doc, "covariates", where),
+        parameters=_quantities(doc, "parameters", where),
+        constants=MappingProxyType(constants),
+        constant_sources=MappingProxyType(sources),
+        variants=tuple(require(doc, "variants", list, where, default=[])),
+        support=require(doc, "support", str, where, default=""),
+        split=MappingProxyType(dict(require(doc, "split", dict, where, default={}))),
+        plot=MappingProxyType(dict(require(doc, "plot", dict, where, default={}))),
+        path=where,
+        sha256=digest,
+        card_text=text,
+    )
+    if not model.observables:
+        raise InputError(where, "a model needs at least one observable", field="observables")
+    resolve_forward(model.forward_ref, where)
+    for pname, col in model.split.items():
+        if pname not in model.parameter_names:
+            raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
+    return model
+
+
+def _display(path):
+    try:
+        return str(path.resolve().relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def list_models():
+    return sorted(available("models"))
+
+
+_FORWARD = {}
+
+
+def _forward_cached(ref, where):
+    if ref not in _FORWARD:
+        _FORWARD[ref] = resolve_forward(ref, where)
+    return _FORWARD[ref]

@@ -1,0 +1,88 @@
+"""Finger sliding on a touchscreen under electroadhesion (seed 000; MODELS.md section 1).
+
+JKR contact area, adhesive friction with an area ratio that grows with the electroadhesive
+energy, and sliding area reduction; plus the two competing variants of the paper.
+"""
+
+import numpy as np
+
+__all__ = [
+    "adhesion_energy",
+    "jkr_area",
+    "electroadhesion",
+    "electroadhesion_coulomb",
+    "electroadhesion_empirical",
+]
+
+
+def _series_thickness(d_air, c):
+    """Dielectric-weighted stack thickness d_sio2/eps_sio2 + d_air/eps_air + d_sc/eps_sc [m]."""
+    return c["d_sio2"] / c["eps_sio2"] + d_air / c["eps_air"] + c["d_sc"] / c["eps_sc"]
+
+
+def adhesion_energy(voltage, d_air, c):
+    """Electroadhesive energy per unit area dgamma [J/m^2], eq. 8 of seed 000.
+
+    ``voltage`` [V] and ``d_air`` [m] broadcast against each other.
+    """
+    return 0.5 * c["eps0"] * voltage**2 / _series_thickness(d_air, c)
+
+
+def jkr_area(normal_force, dgamma, E_star, R):
+    """JKR contact area A0 [m^2] of a sphere of radius ``R`` [m], eq. 6 of seed 000.
+
+    Reduces to the Hertz area pi*(3*R*Fn/(4*E_star))**(2/3) when ``dgamma`` is 0.
+    """
+    k = 3.0 * dgamma * np.pi * R
+    radicand = 6.0 * dgamma * np.pi * R * normal_force + k**2
+    a3 = (3.0 * R / (4.0 * E_star)) * (normal_force + k + np.sqrt(radicand))
+    return np.pi * a3 ** (2.0 / 3.0)
+
+
+def electroadhesion(p, x, c):
+    """Tangential force [N] of the adhesive-friction model, eqs. 6, 8, 10, 12 of seed 000.
+
+    Parameters ``E_star`` [Pa], ``tau0`` [Pa], ``d_air`` [m], ``beta0`` [-], ``phi`` [m^2/J],
+    ``eta`` [m^2/N^2], ``alpha`` [-]; covariates ``normal_force`` [N], ``voltage`` [V].
+
+    The implicit ``Ft = B*(A0 - eta*Ft**2) + alpha*Fn`` is solved by its positive root in the
+    cancellation-free form ``Ft = 2c / (1 + sqrt(1 + 4*B*eta*c))``, ``c = B*A0 + alpha*Fn``.
+    Outside the support: the sliding apparent area ``A0 - eta*Ft**2`` is <= 0.
+    """
+    fn, v = x["normal_force"], x["voltage"]
+    dgamma = adhesion_energy(v, p["d_air"], c)
+    a0 = jkr_area(fn, dgamma, p["E_star"], c["R"])
+    b = p["tau0"] * (p["beta0"] + p["phi"] * dgamma)
+    cc = b * a0 + p["alpha"] * fn
+    disc = 1.0 + 4.0 * b * p["eta"] * cc
+    ok = disc >= 0.0
+    ft = 2.0 * cc / (1.0 + np.sqrt(np.where(ok, disc, 1.0)))
+    ok = ok & (a0 - p["eta"] * ft**2 > 0.0)
+    shape = np.broadcast_shapes(np.shape(ft), np.shape(ok))
+    return {"tangential_force": np.broadcast_to(ft, shape)}, ok
+
+
+def electroadhesion_coulomb(p, x, c):
+    """Coulomb friction with the parallel-plate electrostatic force, eq. 5 of seed 000.
+
+    ``Ft = mu*(Fn + Fe)``, ``Fe = eps0*A0*V**2 / (2*eps_air*t**2)`` with the stack thickness
+    ``t`` and the JKR area ``A0`` of eq. 6.  Parameters ``mu``, ``E_star`` [Pa], ``d_air`` [m].
+    """
+    fn, v = x["normal_force"], x["voltage"]
+    t = _series_thickness(p["d_air"], c)
+    dgamma = 0.5 * c["eps0"] * v**2 / t
+    a0 = jkr_area(fn, dgamma, p["E_star"], c["R"])
+    fe = c["eps0"] * a0 * v**2 / (2.0 * c["eps_air"] * t**2)
+    ft = p["mu"] * (fn + fe)
+    return {"tangential_force": ft}, np.True_
+
+
+def electroadhesion_empirical(p, x, c):
+    """Empirical power law ``Ft = b*Fn**c + d*Fn`` (appendix eq. 16 of seed 000).
+
+    Parameters ``b`` [N^(1-c)], ``c_exp`` [-], ``d`` [-]; the paper fits them per voltage
+    (split by the ``voltage`` column).
+    """
+    fn = x["normal_force"]
+    ft = p["b"] * fn ** p["c_exp"] + p["d"] * fn
+    return {"tangential_force": ft}, np.True_

@@ -1,0 +1,276 @@
+"""The vectorised log-posterior of a model, its priors and a dataset.
+
+Knows nothing about skin: it maps an ensemble of sampled vectors ``z`` (shape (k, d), an
+unconstrained space) to natural parameters, calls the model's forward function once for the
+whole ensemble, and adds the noise log-likelihood and the normalised log-prior.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+from .units import to_si
+
+from .errors import InputError
+from .models import NOISE_MODELS
+
+__all__ = ["Posterior", "Slot", "noise_parameter_names"]
+
+_LOG_2PI = math.log(2.0 * math.pi)
+
+
+def noise_parameter_names(observables, noise):
+    """Names of the noise parameters: ``sigma`` (+ ``nu``), suffixed when several observables."""
+    names = []
+    for obs in observables:
+        suffix = "" if len(observables) == 1 else f"_{obs}"
+        names.append(f"sigma{suffix}")
+        if noise[obs] == "student_t":
+            names.append(f"nu{suffix}")
+    return names
+
+
+@dataclass(frozen=True)
+class Slot:
+    """One sampled scalar: a parameter, or one level of a split parameter."""
+
+    name: str  # display name, e.g. "alpha[25]"
+    base: str  # parameter name, e.g. "alpha"
+    level: str | None
+    prior: object
+    transform: str  # "log" | "identity"
+    lo: float
+    hi: float
+
+
+def _transform_for(prior):
+    """Sampling coordinate: log for non-negative parameters (products the data pin down become
+    linear ridges, which emcee's affine-invariant moves handle well), else the identity.
+    Bounds stay hard: the prior is -inf outside them."""
+    return "log" if prior.lower >= 0 else "identity"
+
+
+class Posterior:
+    """log p(z | data) for an ensemble of walkers, with everything needed to build it.
+
+    Parameters
+    ----------
+    model : skinfit.Model
+    priors : skinfit.PriorSet
+        Must give a prior for every model parameter and every noise parameter.
+    dataset : skinfit.Dataset
+    split : mapping parameter -> grouping column (or list of columns), optional
+        Parameters sampled once per level of the column(s); others are shared.
+    noise : str or mapping observable -> str, optional
+        ``normal`` (default, or the card's), ``student_t`` or ``lognormal``.
+    constants : mapping, optional
+        Overrides of the model card's fixed constants.
+    """
+
+    def __init__(self, model, priors, dataset, *, split=None, noise=None, constants=None):
+        self.model, self.priors, self.dataset = model, priors, dataset
+        where = f"fit of {model.id} on {dataset.id}"
+        frame = dataset.frame
+        self.observables = tuple(o.name for o in model.observables if o.name in frame.columns)
+        if not self.observables:
+            raise InputError(dataset.path, f"no observable of model {model.id!r} in the data "
+                             f"(expected a column {' or '.join(map(repr, model.observable_names))})")
+        card_noise = {o.name: o.noise for o in model.observables}
+        if noise is None or isinstance(noise, str):
+            noise = {o: noise or card_noise[o] for o in self.observables}
+        else:
+            noise = {o: noise.get(o, card_noise[o]) for o in self.observables}
+        for o, kind in noise.items():
+            if kind not in NOISE_MODELS:
+                raise InputError(where, f"unknown noise model {kind!r} for {o} (expected one of "
+                                 f"{', '.join(NOISE_MODELS)})", field="noise")
+        self.noise = noise
+        self.constants = {**model.constants, **(constants or {})}
+        unknown = set(constants or {}) - set(model.constants)
+        if unknown:
+            raise InputError(where, f"unknown constants {sorted(unknown)} (model constants: "
+                             f"{', '.join(model.constants)})", field="constants")
+
+        # covariates and observed values (SI, float arrays of shape (n,))
+        self.x = {}
+        for cov in model.covariates:
+            if cov.name not in frame.columns:
+                if cov.optional:
+                    self.x[cov.name] = np.full(len(frame), np.nan)
+                    continue
+                raise InputError(dataset.path, f"missing covariate column {cov.name!r} [{cov.unit}] "
+                                 f"needed by model {model.id!r}")
+            values = frame[cov.name].to_numpy(dtype=float)
+            if np.isnan(values).any() and not cov.optional:
+                row = int(np.argmax(np.isnan(values))) + 1
+                raise InputError(dataset.path, f"covariate {cov.name!r} is missing, and model "
+                                 f"{model.id!r} needs it at every row", row=row)
+            self.x[cov.name] = values
+        self.y = {o: frame[o].to_numpy(dtype=float) for o in self.observables}
+        for o in self.observables:
+            if np.isnan(self.y[o]).any():
+                row = int(np.argmax(np.isnan(self.y[o]))) + 1
+                raise InputError(dataset.path, f"observable {o!r} is missing", row=row)
+            if noise[o] == "lognormal" and (self.y[o] <= 0).any():
+                row = int(np.argmax(self.y[o] <= 0)) + 1
+                raise InputError(dataset.path, f"observable {o!r} must be > 0 for a log-normal "
+                                 f"likelihood (got {self.y[o][row - 1]:g})", row=row)
+        self.n = len(frame)
+        self._logy = {o: np.log(self.y[o]) for o in self.observables if noise[o] == "lognormal"}
+
+        # which sampled slot feeds each parameter
+        split = dict(model.split if split is None else split)
+        self.split = {}
+        for pname, cols in split.items():
+            if pname not in model.parameter_names:
+                raise InputError(where, f"cannot split unknown parameter {pname!r} (parameters: "
+                                 f"{', '.join(model.parameter_names)})", field="split")
+            cols = (cols,) if isinstance(cols, str) else tuple(cols)
+            for c in cols:
+                if c not in frame.columns:
+                    raise InputError(where, f"cannot split {pname!r} by {c!r}: no such column in "
+                                     f"{dataset.path}", field="split")
+            self.split[pname] = cols
+        self.noise_names = tuple(noise_parameter_names(self.observables, noise))
+        needed = list(model.parameter_names) + list(self.noise_names)
+        missing = [p for p in needed if p not in priors]
+        if missing:
+            raise InputError(priors.path or "priors", f"no prior for {', '.join(missing)} "
+                             f"(model {model.id!r} needs priors for {', '.join(needed)})")
+        slots, self._param_index, self.levels = [], {}, {}
+        for pname in needed:
+            prior = priors[pname]
+            if pname in self.split:
+                labels = _level_labels(frame, self.split[pname], dataset)
+                levels = list(dict.fromkeys(labels))  # order of appearance
+                codes = np.array([levels.index(v) for v in labels])
+                self.levels[pname] = (self.split[pname], tuple(levels))
+                first = len(slots)
+                for lev in levels:
+                    slots.append(Slot(f"{pname}[{lev}]", pname, lev, prior, _transform_for(prior),
+                                      prior.lower, prior.upper))
+                self._param_index[pname] = first + codes  # (n,) gather index
+            else:
+                self._param_index[pname] = len(slots)
+                slots.append(Slot(pname, pname, None, prior, _transform_for(prior), prior.lower, prior.upper))
+        self.slots = tuple(slots)
+        self.names = tuple(s.name for s in slots)
+        self.ndim = len(slots)
+        self._lo = np.array([s.lo for s in slots])
+        self._hi = np.array([s.hi for s in slots])
+        self._log = np.array([s.transform == "log" for s in slots])
+        self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
+
+    # ---- transforms ---------------------------------------------------------------------
+    def to_theta(self, z):
+        """Natural parameters (k, d) from sampled coordinates z (k, d)."""
+        z = np.asarray(z, dtype=float)
+        with np.errstate(over="ignore"):
+            return np.where(self._log, np.exp(z), z)
+
+    def to_z(self, theta):
+        theta = np.asarray(theta, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self._log, np.log(theta), theta)
+
+    def log_jacobian(self, z):
+        """log |d theta / d z| summed over coordinates, shape (k,)."""
+        return np.sum(np.where(self._log, z, 0.0), axis=-1)
+
+    # ---- densities ----------------------------------------------------------------------
+    def unpack(self, theta):
+        """Mapping parameter -> (k, 1) or (k, n) array for the forward function."""
+        theta = np.atleast_2d(theta)
+        return {p: theta[:, idx, None] if np.ndim(idx) == 0 else theta[:, idx]
+                for p, idx in self._param_index.items()}
+
+    def log_prior(self, theta):
+        theta = np.atleast_2d(theta)
+        return sum(s.prior.logpdf(theta[:, j]) for j, s in enumerate(self.slots))
+
+    def pointwise(self, theta):
+        """Pointwise log-likelihood: dict observable -> (k, n), and the predictions.
+
+        Rows of ``theta`` outside the physical support get -inf at every point.
+        """
+        params = self.unpack(theta)
+        k = params[self.model.parameter_names[0]].shape[0] if self.model.parameter_names else len(theta)
+        pred, ok = self.model.forward(params, self.x, self.constants)
+        valid = np.all(np.broadcast_to(ok, (k, self.n)), axis=1)
+        ll = {}
+        for o in self.observables:
+            suffix = "" if len(self.observables) == 1 else f"_{o}"
+            sigma = params[f"sigma{suffix}"]
+            mu = np.broadcast_to(pred[o], (k, self.n))
+            if self.noise[o] == "lognormal":
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    r = (self._logy[o] - np.log(mu)) / sigma
+                ll_o = -0.5 * r * r - np.log(sigma) - 0.5 * _LOG_2PI - self._logy[o]
+            elif self.noise[o] == "student_t":
+                nu = params[f"nu{suffix}"]
+                r = (self.y[o] - mu) / sigma
+                ll_o = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
+                        - 0.5 * np.log(nu * math.pi) - np.log(sigma)
+                        - 0.5 * (nu + 1) * np.log1p(r * r / nu))
+            else:
+                r = (self.y[o] - mu) / sigma
+                ll_o = -0.5 * r * r - np.log(sigma) - 0.5 * _LOG_2PI
+            ll[o] = np.where(valid[:, None], ll_o, -np.inf)
+        return ll, pred, valid
+
+    def log_likelihood(self, theta):
+        ll, _, _ = self.pointwise(theta)
+        return sum(v.sum(axis=1) for v in ll.values())
+
+    def log_density(self, theta):
+        """log prior + log likelihood in natural parameters, (k,); -inf outside support."""
+        theta = np.atleast_2d(theta)
+        lp = self.log_prior(theta)
+        out = np.full(len(theta), -np.inf)
+        inside = np.isfinite(lp)
+        self.counts["evaluations"] += len(theta)
+        self.counts["outside_prior"] += int((~inside).sum())
+        if inside.any():
+            ll = self.log_likelihood(theta[inside])
+            self.counts["outside_support"] += int(np.isneginf(ll).sum())
+            if np.isnan(ll).any():
+                bad = theta[inside][np.isnan(ll)][0]
+                raise FloatingPointError(f"{self.model.id}: NaN log-likelihood at "
+                                         f"{dict(zip(self.names, bad))} (a bug in the forward function)")
+            out[inside] = lp[inside] + ll
+        return out
+
+    def __call__(self, z):
+        """log posterior density of the sampled coordinates z (k, d), Jacobian included."""
+        z = np.atleast_2d(z)
+        return self.log_density(self.to_theta(z)) + self.log_jacobian(z)
+
+    # ---- helpers for optimisers and nested sampling --------------------------------------
+    def prior_transform(self, u):
+        """Map unit-cube points (k, d) to natural parameters distributed as the prior."""
+        u = np.atleast_2d(u)
+        return np.column_stack([s.prior.ppf(u[:, j]) for j, s in enumerate(self.slots)])
+
+    def sample_prior(self, size, rng):
+        return self.prior_transform(rng.uniform(size=(size, self.ndim)))
+
+    def describe(self):
+        return {"parameters": list(self.names), "observables": list(self.observables),
+                "noise": dict(self.noise), "split": {p: list(c) for p, c in self.split.items()},
+                "n_rows": self.n}
+
+
+def _level_labels(frame, cols, dataset):
+    parts = []
+    for c in cols:
+        values = frame[c]
+        try:
+            unit = dataset.column(c).unit
+        except KeyError:
+            unit = None
+        if unit is not None:
+            values = [f"{v / to_si(unit):g}" for v in values.to_numpy(dtype=float)]
+        parts.append([str(v) for v in values])
+    return [",".join(t) for t in zip(*parts)]

@@ -1,0 +1,122 @@
+"""emcee, run until converged: vectorised ensemble, DE moves, walkers from the Laplace ball.
+
+Convergence (see NOTES: walkers are not independent chains): after discarding a burn-in of
+``burn_factor`` integrated autocorrelation times, the kept chain must be at least
+``min_tau_multiple`` (50) times the largest autocorrelation time, the effective sample size
+``nwalkers * n_kept / tau`` must reach ``ess_target`` for every coordinate, and the
+rank-normalised R-hat over walkers must be <= ``rhat_max`` (a secondary check).
+"""
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import arviz as az
+import emcee
+import numpy as np
+from emcee.autocorr import integrated_time
+
+__all__ = ["SamplerRun", "run_emcee", "initial_ball"]
+
+
+@dataclass(frozen=True)
+class SamplerRun:
+    chain: np.ndarray  # kept, thinned samples in sampling coordinates, (nwalkers, ndraw, d)
+    log_prob: np.ndarray  # (nwalkers, ndraw)
+    tau: np.ndarray  # integrated autocorrelation time per coordinate [steps]
+    ess_emcee: np.ndarray  # nwalkers * n_kept / tau
+    rhat_max: float
+    acceptance: np.ndarray  # per walker
+    n_steps: int
+    burn: int
+    thin: int
+    converged: bool
+    reasons: tuple  # why not converged
+    seconds: float
+    evaluations: int
+
+
+def initial_ball(post, z0, cov, nwalkers, rng, max_tries=20):
+    """Walkers drawn from N(z0, cov); draws outside the support are redrawn, then shrunk."""
+    chol = np.linalg.cholesky(cov)
+    out = np.empty((nwalkers, len(z0)))
+    need = np.arange(nwalkers)
+    scale = 1.0
+    for attempt in range(max_tries):
+        cand = z0 + scale * rng.standard_normal((len(need), len(z0))) @ chol.T
+        ok = np.isfinite(post(cand))
+        out[need[ok]] = cand[ok]
+        need = need[~ok]
+        if len(need) == 0:
+            return out
+        if attempt >= 4:
+            scale *= 0.5
+    raise RuntimeError(f"could not place {len(need)} of {nwalkers} walkers inside the support around "
+                       f"the MAP (outside the physical support: {post.counts['outside_support']} evaluations)")
+
+
+def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=50,
+              burn_factor=2.0, max_steps=20000, check_every=200, moves=None, progress=False,
+              keep_total=4000, backend=None):
+    """Run emcee from walkers ``p0`` (nwalkers, d) until converged or ``max_steps``."""
+    t0 = time.perf_counter()
+    nwalkers, d = p0.shape
+    moves = moves if moves is not None else [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    sampler = emcee.EnsembleSampler(nwalkers, d, post, vectorize=True, moves=moves, backend=backend)
+    seed = int(rng.integers(2**32 - 1))
+    state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    bar = _progress_bar(progress, max_steps)
+    n, reasons = 0, ("not run",)
+    while n < max_steps:
+        steps = min(check_every, max_steps - n)
+        for state in sampler.sample(state, iterations=steps):
+            if bar is not None:
+                bar.update(1)
+        n += steps
+        chain = sampler.get_chain()
+        tau, burn, ess, rhat, reasons = _check(chain, ess_target, rhat_max, min_tau_multiple, burn_factor)
+        if bar is not None:
+            bar.set_postfix_str(f"tau={tau.max():.0f} ess={ess.min():.0f} rhat={rhat:.3f}")
+        if not reasons:
+            break
+        check_every = max(check_every, int(0.25 * n))  # geometric schedule: checks stay cheap
+    if bar is not None:
+        bar.close()
+    chain = sampler.get_chain()
+    logp = sampler.get_log_prob()
+    thin = max(1, int(np.ceil((chain.shape[0] - burn) * nwalkers / keep_total)))
+    kept = chain[burn::thin].transpose(1, 0, 2)
+    return SamplerRun(chain=kept, log_prob=logp[burn::thin].T, tau=tau, ess_emcee=ess, rhat_max=rhat,
+                      acceptance=np.asarray(sampler.acceptance_fraction), n_steps=n, burn=burn,
+                      thin=thin, converged=not reasons, reasons=tuple(reasons),
+                      seconds=time.perf_counter() - t0, evaluations=n * nwalkers)
+
+
+def _check(chain, ess_target, rhat_max, min_tau_multiple, burn_factor):
+    n, nwalkers, d = chain.shape
+    tau = integrated_time(chain[n // 4:], tol=0)
+    burn = min(n // 2, int(np.ceil(burn_factor * tau.max())))
+    kept = chain[burn:]
+    tau = integrated_time(kept, tol=0)
+    n_kept = kept.shape[0]
+    ess = nwalkers * n_kept / tau
+    step = max(1, int(tau.min() / 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rhat = float(np.max(az.rhat(kept[::step].transpose(1, 0, 2), chain_axis=0, draw_axis=1)))
+    reasons = []
+    if n_kept < min_tau_multiple * tau.max():
+        reasons.append(f"chain of {n_kept} kept steps < {min_tau_multiple} x tau = {min_tau_multiple * tau.max():.0f}")
+    if ess.min() < ess_target:
+        reasons.append(f"min ESS {ess.min():.0f} < {ess_target}")
+    if not rhat <= rhat_max:
+        reasons.append(f"max R-hat {rhat:.3f} > {rhat_max}")
+    return tau, burn, ess, rhat, reasons
+
+
+def _progress_bar(progress, total):
+    if not progress:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="emcee", unit="step", leave=False, mininterval=0.5)

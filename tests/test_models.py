@@ -1,0 +1,56 @@
+"""Every model card: loads, resolves through the registry, matches its function and priors."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import skinfit
+
+ROOT = Path(skinfit.__file__).resolve().parents[1]
+CARDS = sorted(p.stem for p in (ROOT / "models").glob("*.toml"))
+
+
+@pytest.mark.parametrize("card", CARDS)
+def test_card_matches_function_and_priors(card, rng):
+    model = skinfit.load_model(card)
+    assert model.id == card
+    priors = skinfit.load_priors(card)
+    for variant in model.variants:
+        assert variant in CARDS, f"{card} names unknown variant {variant}"
+    # a prior draw of k parameter vectors evaluated on synthetic covariates gives (k, n)
+    k, n = 6, 11
+    params = {p: priors[p].rvs(k, rng) for p in model.parameter_names}
+    cov = {c.name: np.linspace(0.5, 1.5, n) for c in model.covariates}
+    y, ok = model.evaluate({p: v[:, None] for p, v in params.items()}, cov)
+    assert set(y) == set(model.observable_names)
+    for arr in y.values():
+        assert arr.shape == (k, n) and np.all(np.isfinite(arr))
+    assert np.broadcast_to(ok, (k, n)).shape == (k, n)
+
+
+def test_card_may_only_name_registry_functions(tmp_path):
+    text = (ROOT / "models" / "electroadhesion.toml").read_text()
+    for ref, match in [("os:system", "expected 'skinfit.physics.<module>:<function>'"),
+                       ("skinfit.physics.electroadhesion:np", "exports no model function 'np'"),
+                       ("skinfit.physics.nothere:f", "no physics module")]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text.replace('"skinfit.physics.electroadhesion:electroadhesion"', f'"{ref}"'))
+        with pytest.raises(skinfit.InputError, match=match):
+            skinfit.load_model(str(bad))
+
+
+def test_unknown_noise_and_missing_field(tmp_path):
+    text = (ROOT / "models" / "electroadhesion.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('noise = "normal"', 'noise = "laplace"'))
+    with pytest.raises(skinfit.InputError, match=r"observables\[0\].noise: unknown noise model 'laplace'"):
+        skinfit.load_model(str(bad))
+    bad.write_text(text.replace('title = ', 'name_of_it = '))
+    with pytest.raises(skinfit.InputError, match="title: missing required field"):
+        skinfit.load_model(str(bad))
+
+
+def test_unknown_model_lists_known():
+    with pytest.raises(skinfit.InputError, match="no such model .*electroadhesion"):
+        skinfit.load_model("nope")
