@@ -218,8 +218,10 @@ class Fit:
     def summary(self):
         """Per parameter: mean, sd, 3%/97% HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
 
-        ``contraction`` is 1 - var_posterior / var_prior: near 1 the data determined the
-        parameter, near 0 its posterior is its prior (``note`` says so).
+        ``contraction`` is 1 - var_posterior / var_prior, in the sampling coordinate (log for
+        positive parameters): near 1 the data determined the parameter; below 0.5 the
+        posterior is mostly its prior and ``note`` says so (e.g. ``tau0`` of electroadhesion,
+        which the forces determine only through tau0*beta0 and tau0*phi).
         """
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -235,11 +237,16 @@ class Fit:
         contraction, notes = [], []
         for name in table.index:
             slot = rows[name]
-            values = _slot_values(post_ds, slot)
-            var_prior = priors[slot["base"]].moments()[1] if slot["base"] in priors else np.nan
-            c = 1.0 - float(np.var(values)) / var_prior if var_prior > 0 else np.nan
+            c = np.nan
+            if slot["base"] in priors:
+                prior = priors[slot["base"]]
+                q = prior.ppf((np.arange(4000) + 0.5) / 4000)
+                values = _slot_values(post_ds, slot)
+                if prior.lower >= 0:  # the sampling coordinate: log for positive parameters
+                    q, values = np.log(q), np.log(values)
+                c = 1.0 - float(np.var(values)) / float(np.var(q))
             contraction.append(c)
-            notes.append("prior-dominated: the data barely inform it" if c < 0.2 else "")
+            notes.append("mostly prior: the data barely determine it" if c < 0.5 else "")
         del prior_ds
         table["map"] = [self.map[n] for n in table.index]
         table["tau"] = [sampler["tau"][n] for n in table.index]

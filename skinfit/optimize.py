@@ -147,12 +147,13 @@ def laplace_covariance(post, z0, h=1e-3):
     f = post(np.array(pts))
     f0, it = f[0], 1
     hess = np.zeros((d, d))
-    for i in range(d):
-        hess[i, i] = (f[it] - 2 * f0 + f[it + 1]) / h**2
-        it += 2
-        for j in range(i + 1, d):
-            hess[i, j] = hess[j, i] = (f[it] - f[it + 1] - f[it + 2] + f[it + 3]) / (4 * h**2)
-            it += 4
+    with np.errstate(invalid="ignore"):  # -inf - -inf at the support's edge: handled below
+        for i in range(d):
+            hess[i, i] = (f[it] - 2 * f0 + f[it + 1]) / h**2
+            it += 2
+            for j in range(i + 1, d):
+                hess[i, j] = hess[j, i] = (f[it] - f[it + 1] - f[it + 2] + f[it + 3]) / (4 * h**2)
+                it += 4
     if not np.all(np.isfinite(hess)):
         hess = np.where(np.isfinite(hess), hess, 0.0)
         hess[np.diag_indices(d)] = np.where(np.diag(hess) < 0, np.diag(hess), -1.0)

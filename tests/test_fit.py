@@ -1,0 +1,189 @@
+"""End to end on electroadhesion: recovery, reproducibility, MAP, likelihoods, results file."""
+
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import optimize, stats
+
+import skinfit
+from skinfit.optimize import find_map
+from skinfit.posterior import Posterior
+
+ROOT = Path(skinfit.__file__).resolve().parents[1]
+CARD = tomllib.loads((ROOT / "datasets/electroadhesion_synthetic/dataset.toml").read_text())
+TRUTH = {**CARD["provenance"]["generating_parameters"], "sigma": CARD["provenance"]["noise"]["sigma"]}
+
+
+def _short_fit(**kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        return skinfit.fit("electroadhesion", "electroadhesion_synthetic", max_steps=400, n_global=300,
+                           **kw)
+
+
+def test_recovery_truth_in_95_interval(ea_fit):
+    assert ea_fit.converged
+    post = ea_fit.idata["posterior"].to_dataset()
+    for name, truth in TRUTH.items():
+        lo, hi = np.quantile(post[name].values, [0.025, 0.975])
+        assert lo < truth < hi, f"{name}: truth {truth:g} outside 95% interval [{lo:g}, {hi:g}]"
+
+
+def test_summary_columns_and_diagnostics(ea_fit):
+    table = ea_fit.summary()
+    assert list(table.columns) == ["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail",
+                                   "map", "tau", "contraction", "note"]
+    assert (table["r_hat"] < 1.02).all() and (table["ess_bulk"] > 400).all()
+    sampler = ea_fit.attr("sampler")
+    assert sampler["n_steps"] - sampler["burn"] >= 50 * max(sampler["tau"].values())
+    # the forces pin alpha, sigma and eta; tau0 enters only through products: mostly prior
+    assert table.loc["alpha", "contraction"] > 0.95 and table.loc["sigma", "contraction"] > 0.95
+    assert table.loc["tau0", "contraction"] < 0.5 and table.loc["tau0", "note"].startswith("mostly prior")
+    text = ea_fit.report_text()
+    for needle in ["converged: yes", "acceptance", "wall time", "outside the physical support", "tau0"]:
+        assert needle in text
+
+
+def test_result_tree_groups_and_provenance(ea_fit):
+    tree = ea_fit.idata
+    assert {"posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data",
+            "constant_data", "prior"} <= set(tree.children)
+    ds = skinfit.load_dataset("electroadhesion_synthetic")
+    assert tree.attrs["dataset_sha256"] == ds.sha256
+    assert tree.attrs["model_sha256"] == skinfit.load_model("electroadhesion").sha256
+    assert tree.attrs["seed"] == 1
+    assert tree["log_likelihood"]["tangential_force"].shape[-1] == len(ds)
+    np.testing.assert_allclose(tree["observed_data"]["tangential_force"].values, ds.frame["tangential_force"])
+
+
+def test_save_load_identical(ea_fit, tmp_path):
+    path = ea_fit.save(tmp_path / "run" / "fit.nc")
+    back = skinfit.load_fit(path)
+    for group in ["posterior", "log_likelihood", "posterior_predictive", "constant_data"]:
+        a, b = ea_fit.idata[group].to_dataset(), back.idata[group].to_dataset()
+        for var in a.data_vars:
+            np.testing.assert_array_equal(a[var].values, b[var].values)
+    assert dict(back.idata.attrs) == {k: v for k, v in ea_fit.idata.attrs.items()}
+    pd.testing.assert_frame_equal(back.summary(), ea_fit.summary())
+    # the saved fit carries everything needed to rebuild its posterior
+    theta = ea_fit.posterior.to_theta(ea_fit.posterior.to_z(np.array([list(ea_fit.map.values())])))
+    assert back.posterior.log_density(theta) == pytest.approx(ea_fit.posterior.log_density(theta), rel=1e-12)
+
+
+def test_same_seed_identical_samples():
+    a, b = _short_fit(rng=7), _short_fit(rng=7)
+    np.testing.assert_array_equal(a.idata["posterior"]["E_star"].values, b.idata["posterior"]["E_star"].values)
+    np.testing.assert_array_equal(a.idata["posterior_predictive"]["tangential_force"].values,
+                                  b.idata["posterior_predictive"]["tangential_force"].values)
+    c = _short_fit(rng=8)
+    assert not np.array_equal(a.idata["posterior"]["E_star"].values, c.idata["posterior"]["E_star"].values)
+
+
+def test_different_seed_consistent_posterior(ea_fit):
+    other = skinfit.fit("electroadhesion", "electroadhesion_synthetic", rng=2)
+    s1, s2 = ea_fit.summary(), other.summary()
+    for name in s1.index:
+        # difference of means within 5 combined Monte Carlo standard errors (sd / sqrt(ESS))
+        se = np.hypot(s1.loc[name, "sd"] / np.sqrt(s1.loc[name, "ess_bulk"]),
+                      s2.loc[name, "sd"] / np.sqrt(s2.loc[name, "ess_bulk"]))
+        assert abs(s1.loc[name, "mean"] - s2.loc[name, "mean"]) < 5 * se, name
+
+
+def _noiseless_dataset(tmp_path, truth, rng):
+    model = skinfit.load_model("electroadhesion_coulomb")
+    v, fn = np.meshgrid(np.arange(0, 201, 50.0), np.linspace(0.2, 2, 10), indexing="ij")
+    frame = pd.DataFrame({"voltage": v.ravel(), "normal_force": fn.ravel()})
+    frame["tangential_force"] = model.predict(truth, frame)
+    d = tmp_path / "noiseless"
+    d.mkdir()
+    frame.to_csv(d / "data.csv", index=False, float_format="%.17g")
+    (d / "dataset.toml").write_text(
+        'schema_version = 1\nid = "noiseless"\nfile = "data.csv"\n'
+        '[provenance]\nkind = "simulated"\nseed = 0\ngenerating_parameters = {}\n'
+        '[columns.voltage]\nunit = "V"\n[columns.normal_force]\nunit = "N"\n[columns.tangential_force]\nunit = "N"\n')
+    return skinfit.load_dataset(str(d)), frame
+
+
+def test_map_agrees_with_least_squares_on_noiseless_data(tmp_path, rng):
+    truth = {"mu": 0.42, "E_star": 30e3, "d_air": 0.4e-6}
+    ds, frame = _noiseless_dataset(tmp_path, truth, rng)
+    model = skinfit.load_model("electroadhesion_coulomb")
+    post = Posterior(model, skinfit.load_priors("electroadhesion_coulomb"), ds)
+    m = find_map(post, rng).as_dict(post.names)
+
+    def resid(logp):
+        p = dict(zip(["mu", "E_star", "d_air"], np.exp(logp)))
+        return model.predict(p, frame) - frame["tangential_force"].to_numpy()
+
+    ls = optimize.least_squares(resid, np.log([0.5, 40e3, 1e-6]), xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    for name, value in zip(["mu", "E_star", "d_air"], np.exp(ls.x)):
+        assert m[name] == pytest.approx(value, rel=1e-3), name
+        assert value == pytest.approx(truth[name], rel=1e-4)
+
+
+@pytest.mark.parametrize("noise", ["normal", "student_t", "lognormal"])
+def test_pointwise_likelihood_matches_scipy(noise, rng):
+    model = skinfit.load_model("electroadhesion_coulomb")
+    ds = skinfit.load_dataset("electroadhesion_synthetic")
+    priors = skinfit.load_priors("electroadhesion_coulomb")
+    if noise == "student_t":
+        from types import MappingProxyType
+
+        from skinfit.priors import PriorSet, parse_prior
+
+        extra = parse_prior("nu", {"dist": "gamma", "shape": 2, "scale": 10, "bounds": [1, 200],
+                                   "source": "Juarez & Steel 2010 gamma(2, 0.1) prior on nu"}, "test")
+        priors = PriorSet("t", priors.model, MappingProxyType({**priors.priors, "nu": extra}))
+    post = Posterior(model, priors, ds, noise=noise)
+    theta = post.sample_prior(4, rng)
+    ll, pred, _ = post.pointwise(theta)
+    y = ds.frame["tangential_force"].to_numpy()
+    p = post.unpack(theta)
+    mu, sigma = pred["tangential_force"], p["sigma"]
+    ref = {"normal": lambda: stats.norm.logpdf(y, mu, sigma),
+           "student_t": lambda: stats.t.logpdf(y, p["nu"], mu, sigma),
+           "lognormal": lambda: stats.lognorm.logpdf(y, sigma, scale=mu)}[noise]()
+    np.testing.assert_allclose(ll["tangential_force"], ref, rtol=1e-10)
+
+
+def test_split_parameter_per_voltage(rng):
+    model = skinfit.load_model("electroadhesion")
+    ds = skinfit.load_dataset("electroadhesion_synthetic")
+    post = Posterior(model, skinfit.load_priors("electroadhesion"), ds, split={"alpha": "voltage"})
+    assert [n for n in post.names if n.startswith("alpha")] == [f"alpha[{v}]" for v in range(0, 201, 25)]
+    theta = post.sample_prior(3, rng)
+    alpha_rows = post.unpack(theta)["alpha"]  # (k, n): each row's own level
+    for level in range(0, 201, 25):
+        rows = ds.frame["voltage"].to_numpy() == level
+        own = theta[:, [post.names.index(f"alpha[{level}]")]]
+        np.testing.assert_array_equal(alpha_rows[:, rows], np.broadcast_to(own, (3, rows.sum())))
+    fit = _short_fit(rng=3, split={"alpha": "voltage"})
+    assert fit.idata["posterior"]["alpha"].dims == ("chain", "draw", "voltage")
+    assert "alpha[200]" in fit.summary().index
+
+
+def test_outside_support_is_minus_inf_and_counted():
+    model = skinfit.load_model("electroadhesion")
+    ds = skinfit.load_dataset("electroadhesion_synthetic")
+    post = Posterior(model, skinfit.load_priors("electroadhesion"), ds)
+    table_i = {"E_star": 35e3, "tau0": 10.64e3, "d_air": 0.19e-6, "beta0": 0.0049, "phi": 0.47,
+               "eta": 3.72e-4, "alpha": 0.5, "sigma": 0.02}
+    lp = post.log_density(np.array([[table_i[n] for n in post.names]]))
+    assert lp[0] == -np.inf
+    assert post.counts["outside_support"] == 1
+
+
+def test_bad_split_and_noise_rejected():
+    with pytest.raises(skinfit.InputError, match="cannot split 'alpha' by 'material'"):
+        skinfit.fit("electroadhesion", "electroadhesion_synthetic", split={"alpha": "material"}, rng=0)
+    with pytest.raises(skinfit.InputError, match="unknown noise model 'cauchy'"):
+        skinfit.fit("electroadhesion", "electroadhesion_synthetic", noise="cauchy", rng=0)
+
+
+def test_rng_types():
+    with pytest.raises(TypeError, match="rng must be"):
+        skinfit.fit("electroadhesion", "electroadhesion_synthetic", rng="seven")
