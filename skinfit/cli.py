@@ -83,6 +83,12 @@ def _cmd_fit(args):
 
     out = Path(args.out)
     split = _parse_split(args.split) or None
+    if args.by:
+        from .groups import fit_by
+
+        return fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
+                      split=split, noise=args.noise, progress=not args.quiet, strict=args.strict,
+                      ess_target=args.ess, max_steps=args.max_steps)
     t0 = time.perf_counter()
     result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
                  noise=args.noise, progress=not args.quiet, strict=args.strict,
@@ -104,6 +110,17 @@ def _cmd_demo(args):
     path = result.save(out / "electroadhesion" / "fit.nc")
     print(result.report_text())
     print(f"\nwritten: {path}")
+
+
+def _lazy(module, function):
+    """A command implemented in another module, imported only when it runs."""
+
+    def run(args):
+        import importlib
+
+        return getattr(importlib.import_module(module), function)(args)
+
+    return run
 
 
 def build_parser():
@@ -131,9 +148,35 @@ def build_parser():
     s.add_argument("--noise", choices=["normal", "student_t", "lognormal"], help="noise model override")
     s.add_argument("--ess", type=float, default=400, help="minimum effective sample size (default 400)")
     s.add_argument("--max-steps", type=int, default=20000, help="emcee step cap (default 20000)")
-    s.add_argument("--strict", action="store_true", help="exit non-zero if not converged")
+    s.add_argument("--by", action="append", metavar="COLUMN",
+                   help="fit each level of COLUMN separately (repeatable, e.g. --by subject); "
+                        "one result per group under --out plus index.json")
+    s.add_argument("--resume", action="store_true",
+                   help="continue an interrupted fit from its checkpoint in --out")
+    s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_fit)
+    s = sub.add_parser("compare", help="rank fits of the same data by evidence (log Z, Bayes factors) and LOO")
+    s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
+    s.add_argument("--method", default="bridge", choices=["bridge", "laplace", "nested"],
+                   help="evidence estimator (default bridge sampling)")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=_lazy("skinfit.compare", "cli_compare"))
+    s = sub.add_parser("report", help="write a self-contained static HTML report of fits")
+    s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
+    s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
+    s.set_defaults(func=_lazy("skinfit.report", "cli_report"))
+    s = sub.add_parser("campaign", help="run a (models x datasets x groups) matrix of fits")
+    s.add_argument("campaign", help="campaign TOML file")
+    s.add_argument("--scheduler", help="Dask scheduler: tcp://HOST:PORT, or 'local' for a LocalCluster")
+    s.add_argument("--workers", type=int, default=None, help="local worker processes (default: cores)")
+    s.set_defaults(func=_lazy("skinfit.campaign", "cli_campaign"))
+    s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
+    s.add_argument("model", help="model id")
+    s.add_argument("--n-sims", type=int, default=100, help="number of simulated datasets")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", default=None, help="directory for the rank table and histogram")
+    s.set_defaults(func=_lazy("skinfit.sbc", "cli_sbc"))
     s = sub.add_parser("demo", help="fit the shipped datasets and print the results")
     s.add_argument("--out", default="runs/demo", help="where results go (default runs/demo)")
     s.add_argument("--seed", type=int, default=1)

@@ -15,6 +15,7 @@ from .units import to_si
 
 from .errors import InputError
 from .models import NOISE_MODELS
+from .priors import _LOGPDF
 
 __all__ = ["Posterior", "Slot", "noise_parameter_names"]
 
@@ -161,6 +162,7 @@ class Posterior:
         self._lo = np.array([s.lo for s in slots])
         self._hi = np.array([s.hi for s in slots])
         self._log = np.array([s.transform == "log" for s in slots])
+        self._prior_groups = _prior_groups(slots)
         self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
 
     # ---- transforms ---------------------------------------------------------------------
@@ -187,8 +189,14 @@ class Posterior:
                 for p, idx in self._param_index.items()}
 
     def log_prior(self, theta):
+        """Normalised log prior, (k,): one vectorised closed form per distribution family."""
         theta = np.atleast_2d(theta)
-        return sum(s.prior.logpdf(theta[:, j]) for j, s in enumerate(self.slots))
+        inside = np.all((theta >= self._lo) & (theta <= self._hi), axis=1)
+        total = np.zeros(len(theta))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for dist, cols, args, norm in self._prior_groups:
+                total += (_LOGPDF[dist](theta[:, cols], args, None, None) - norm).sum(axis=1)
+        return np.where(inside, total, -np.inf)
 
     def pointwise(self, theta):
         """Pointwise log-likelihood: dict observable -> (k, n), and the predictions.
@@ -260,6 +268,19 @@ class Posterior:
         return {"parameters": list(self.names), "observables": list(self.observables),
                 "noise": dict(self.noise), "split": {p: list(c) for p, c in self.split.items()},
                 "n_rows": self.n}
+
+
+def _prior_groups(slots):
+    """Slots grouped by prior family: (dist, columns, argument arrays, normalising constants)."""
+    groups = {}
+    for j, s in enumerate(slots):
+        groups.setdefault(s.prior.dist, []).append(j)
+    out = []
+    for dist, cols in groups.items():
+        priors = [slots[j].prior for j in cols]
+        args = {k: np.array([p.args[k] for p in priors]) for k in priors[0].args}
+        out.append((dist, np.array(cols), args, np.array([p._log_norm for p in priors])))
+    return tuple(out)
 
 
 def _level_labels(frame, cols, dataset):

@@ -187,3 +187,17 @@ def test_bad_split_and_noise_rejected():
 def test_rng_types():
     with pytest.raises(TypeError, match="rng must be"):
         skinfit.fit("electroadhesion", "electroadhesion_synthetic", rng="seven")
+
+
+def test_map_error_when_every_start_fails(tmp_path):
+    """Priors that only allow eta so large that A_app < 0 at every point: a clear error."""
+    from skinfit.optimize import MAPError
+
+    text = (ROOT / "priors" / "electroadhesion.toml").read_text()
+    start, end = text.index("[eta]"), text.index("[alpha]")
+    bad = tmp_path / "ea.toml"
+    bad.write_text(text[:start] + '[eta]\ndist = "uniform"\nbounds = [0.5, 1.0]\nsource = "test"\n\n' + text[end:])
+    with pytest.raises(MAPError, match=r"MAP failed: .* outside the physical support: \d+") as info:
+        skinfit.fit("electroadhesion", "electroadhesion_synthetic", priors=skinfit.load_priors(str(bad)),
+                    rng=0, n_global=200)
+    assert info.value.result.evaluations >= 200
