@@ -149,7 +149,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
         "optimizer": json.dumps({"starts": list(map_result.starts), "evaluations": map_result.evaluations}),
         "sampler": json.dumps({
             "nwalkers": nw, "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin,
-            "moves": "DEMove 0.5 + DESnookerMove 0.5", "tau": dict(zip(post.names, run.tau.tolist())),
+            "moves": "DEMove 0.8 + skinfit.moves.SnookerMove 0.2", "tau": dict(zip(post.names, run.tau.tolist())),
             "ess_emcee": dict(zip(post.names, run.ess_emcee.tolist())), "rhat_max": run.rhat_max,
             "acceptance_mean": float(run.acceptance.mean()), "acceptance_min": float(run.acceptance.min()),
             "converged": run.converged, "reasons": list(run.reasons), "evaluations": run.evaluations}),

@@ -64,6 +64,7 @@ class Model:
     support: str = ""
     split: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     plot: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    shear: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     path: str = ""
     sha256: str = ""
     card_text: str = ""
@@ -221,6 +222,8 @@ def _parse_model_text(text, where, digest):
         support=require(doc, "support", str, where, default=""),
         split=MappingProxyType(dict(require(doc, "split", dict, where, default={}))),
         plot=MappingProxyType(dict(require(doc, "plot", dict, where, default={}))),
+        shear=MappingProxyType(dict(require(require(doc, "sampling", dict, where, default={}),
+                                            "shear", dict, where, field_prefix="sampling.", default={}))),
         path=where,
         sha256=digest,
         card_text=text,
@@ -231,6 +234,11 @@ def _parse_model_text(text, where, digest):
     for pname, col in model.split.items():
         if pname not in model.parameter_names:
             raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
+    for pname, ref in model.shear.items():
+        if pname not in model.parameter_names or not isinstance(ref, str):
+            raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
+                             f"(got {pname} = {ref!r})", field=f"sampling.shear.{pname}")
+        resolve_forward(ref, where)
     return model
 
 

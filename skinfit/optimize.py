@@ -96,13 +96,18 @@ def find_map(post, rng, *, n_global=2000, n_local=3, maxeval=3000, xtol_rel=1e-7
                         "log_density": value, "evaluations": count[0] - before})
         if value > best and value > _PENALTY / 2:
             best_w, best = w, value
-    if best_w is not None:
+    for _ in range(3):  # polish: restarting BOBYQA rebuilds its quadratic model
+        if best_w is None:
+            break
         before = count[0]
         w, value, code = _bobyqa(objective, best_w, maxeval, xtol_rel * 1e-2, 0.005)
         records.append({"start": "polish", "status": NLOPT_CODES.get(code, str(code)),
                         "log_density": value, "evaluations": count[0] - before})
+        improved = value - best
         if value >= best:
             best_w, best = w, value
+        if improved < 1e-9:
+            break
     evaluations += count[0]
     result = MAPResult(theta=box.theta(best_w)[0] if best_w is not None else np.full(post.ndim, np.nan),
                        log_density=float(best), starts=tuple(records), evaluations=evaluations,

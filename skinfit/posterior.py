@@ -14,7 +14,7 @@ from scipy import special
 from .units import to_si
 
 from .errors import InputError
-from .models import NOISE_MODELS
+from .models import NOISE_MODELS, resolve_forward as _resolve
 from .priors import _LOGPDF
 
 __all__ = ["Posterior", "Slot", "noise_parameter_names"]
@@ -120,6 +120,7 @@ class Posterior:
                                  f"likelihood (got {self.y[o][row - 1]:g})", row=row)
         self.n = len(frame)
         self._logy = {o: np.log(self.y[o]) for o in self.observables if noise[o] == "lognormal"}
+        self._sum_logy = {o: float(v.sum()) for o, v in self._logy.items()}
 
         # which sampled slot feeds each parameter
         split = dict(model.split if split is None else split)
@@ -163,29 +164,73 @@ class Posterior:
         self._hi = np.array([s.hi for s in slots])
         self._log = np.array([s.transform == "log" for s in slots])
         self._prior_groups = _prior_groups(slots)
+        self._shear = self._shear_plan(model)
         self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
 
     # ---- transforms ---------------------------------------------------------------------
+    def _shear_plan(self, model):
+        """(column, offset function) pairs for the card's ``[sampling.shear]`` declarations.
+
+        A sheared parameter is sampled as ``log(theta) - offset(other parameters)``: a
+        triangular map with unit Jacobian.  Applied only to shared (not split) parameters
+        sampled in log, with offsets of shared parameters; otherwise the plain log is used.
+        """
+        plan = []
+        sheared = set(model.shear)
+        for pname, ref in model.shear.items():
+            j = self._param_index.get(pname)
+            if not isinstance(j, int) or not self._log[j]:
+                continue
+            plan.append((j, _resolve(ref), sheared))
+        return tuple(plan)
+
+    def _offsets(self, z_plain):
+        """Offsets of the sheared columns, computed from the other (plain) coordinates."""
+        theta = None
+        out = []
+        for j, func, sheared in self._shear:
+            if theta is None:
+                with np.errstate(over="ignore"):
+                    theta = np.where(self._log, np.exp(z_plain), z_plain)
+            p = {name: theta[:, idx] for name, idx in self._param_index.items()
+                 if isinstance(idx, int) and name not in sheared}
+            out.append((j, func(p, self.constants)))
+        return out
+
+    def _to_plain(self, u):
+        """Sampled coordinates -> plain coordinates (log theta or theta)."""
+        if not self._shear:
+            return u
+        z = np.array(u, dtype=float, copy=True)
+        for j, off in self._offsets(z):
+            z[:, j] = u[:, j] + off
+        return z
+
     def to_theta(self, z):
         """Natural parameters (k, d) from sampled coordinates z (k, d)."""
-        z = np.asarray(z, dtype=float)
+        z = self._to_plain(np.atleast_2d(np.asarray(z, dtype=float)))
         with np.errstate(over="ignore"):
             return np.where(self._log, np.exp(z), z)
 
     def to_z(self, theta):
-        theta = np.asarray(theta, dtype=float)
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(self._log, np.log(theta), theta)
+            z = np.where(self._log, np.log(theta), theta)
+        if self._shear:
+            for j, off in self._offsets(z):
+                z[:, j] = z[:, j] - off
+        return z
 
     def log_jacobian(self, z):
-        """log |d theta / d z| summed over coordinates, shape (k,)."""
+        """log |d theta / d z| summed over coordinates, shape (k,) (shears have unit Jacobian)."""
+        z = self._to_plain(np.atleast_2d(np.asarray(z, dtype=float)))
         return np.sum(np.where(self._log, z, 0.0), axis=-1)
 
     # ---- densities ----------------------------------------------------------------------
     def unpack(self, theta):
         """Mapping parameter -> (k, 1) or (k, n) array for the forward function."""
         theta = np.atleast_2d(theta)
-        return {p: theta[:, idx, None] if np.ndim(idx) == 0 else theta[:, idx]
+        return {p: theta[:, idx:idx + 1] if isinstance(idx, int) else theta[:, idx]
                 for p, idx in self._param_index.items()}
 
     def log_prior(self, theta):
@@ -198,62 +243,90 @@ class Posterior:
                 total += (_LOGPDF[dist](theta[:, cols], args, None, None) - norm).sum(axis=1)
         return np.where(inside, total, -np.inf)
 
-    def pointwise(self, theta):
-        """Pointwise log-likelihood: dict observable -> (k, n), and the predictions.
+    def _evaluate(self, theta, pointwise):
+        """Forward model + noise log-likelihood: (ll, pred, valid).
 
-        Rows of ``theta`` outside the physical support get -inf at every point.
+        ``ll`` maps observable -> (k, n) pointwise values when ``pointwise``, else -> (k,)
+        totals (the sampling hot path: no per-point constants materialised).
         """
         params = self.unpack(theta)
-        k = params[self.model.parameter_names[0]].shape[0] if self.model.parameter_names else len(theta)
+        k = len(theta)
         pred, ok = self.model.forward(params, self.x, self.constants)
-        valid = np.all(np.broadcast_to(ok, (k, self.n)), axis=1)
+        ok = np.asarray(ok)
+        valid = ok.all(axis=-1) if ok.ndim == 2 else np.full(k, bool(ok.all()) if ok.ndim else bool(ok))
+        if ok.ndim == 2 and ok.shape[0] != k:
+            valid = np.broadcast_to(valid, (k,))
         ll = {}
         for o in self.observables:
             suffix = "" if len(self.observables) == 1 else f"_{o}"
             sigma = params[f"sigma{suffix}"]
-            mu = np.broadcast_to(pred[o], (k, self.n))
+            mu = pred[o]
             if self.noise[o] == "lognormal":
                 with np.errstate(divide="ignore", invalid="ignore"):
                     r = (self._logy[o] - np.log(mu)) / sigma
-                ll_o = -0.5 * r * r - np.log(sigma) - 0.5 * _LOG_2PI - self._logy[o]
+                const = -np.log(sigma) - 0.5 * _LOG_2PI
+                ll[o] = (-0.5 * r * r + const - self._logy[o] if pointwise
+                         else -0.5 * (r * r).sum(axis=1) + self.n * const[:, 0] - self._sum_logy[o])
             elif self.noise[o] == "student_t":
                 nu = params[f"nu{suffix}"]
                 r = (self.y[o] - mu) / sigma
-                ll_o = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
-                        - 0.5 * np.log(nu * math.pi) - np.log(sigma)
-                        - 0.5 * (nu + 1) * np.log1p(r * r / nu))
+                lt = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
+                      - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))
+                ll[o] = np.broadcast_to(lt, (k, self.n)) if pointwise else np.broadcast_to(lt, (k, self.n)).sum(axis=1)
             else:
                 r = (self.y[o] - mu) / sigma
-                ll_o = -0.5 * r * r - np.log(sigma) - 0.5 * _LOG_2PI
-            ll[o] = np.where(valid[:, None], ll_o, -np.inf)
+                const = -np.log(sigma) - 0.5 * _LOG_2PI
+                ll[o] = -0.5 * r * r + const if pointwise else -0.5 * (r * r).sum(axis=1) + self.n * const[:, 0]
+            ll[o] = np.where(valid[:, None] if pointwise else valid, ll[o], -np.inf)
         return ll, pred, valid
 
+    def pointwise(self, theta):
+        """Pointwise log-likelihood: dict observable -> (k, n), the predictions, and validity.
+
+        Rows of ``theta`` outside the physical support get -inf at every point.
+        """
+        theta = np.atleast_2d(theta)
+        ll, pred, valid = self._evaluate(theta, True)
+        k = len(theta)
+        return ({o: np.broadcast_to(v, (k, self.n)) for o, v in ll.items()},
+                {o: np.broadcast_to(v, (k, self.n)) for o, v in pred.items()}, valid)
+
     def log_likelihood(self, theta):
-        ll, _, _ = self.pointwise(theta)
-        return sum(v.sum(axis=1) for v in ll.values())
+        ll, _, _ = self._evaluate(np.atleast_2d(theta), False)
+        total = None
+        for v in ll.values():
+            total = v if total is None else total + v
+        return total
 
     def log_density(self, theta):
         """log prior + log likelihood in natural parameters, (k,); -inf outside support."""
         theta = np.atleast_2d(theta)
         lp = self.log_prior(theta)
-        out = np.full(len(theta), -np.inf)
         inside = np.isfinite(lp)
+        n_in = int(inside.sum())
         self.counts["evaluations"] += len(theta)
-        self.counts["outside_prior"] += int((~inside).sum())
-        if inside.any():
-            ll = self.log_likelihood(theta[inside])
-            self.counts["outside_support"] += int(np.isneginf(ll).sum())
-            if np.isnan(ll).any():
-                bad = theta[inside][np.isnan(ll)][0]
-                raise FloatingPointError(f"{self.model.id}: NaN log-likelihood at "
-                                         f"{dict(zip(self.names, bad))} (a bug in the forward function)")
-            out[inside] = lp[inside] + ll
+        self.counts["outside_prior"] += len(theta) - n_in
+        if n_in == 0:
+            return lp
+        sub = theta if n_in == len(theta) else theta[inside]
+        ll = self.log_likelihood(sub)
+        self.counts["outside_support"] += int(np.isneginf(ll).sum())
+        if np.isnan(ll).any():
+            bad = sub[np.isnan(ll)][0]
+            raise FloatingPointError(f"{self.model.id}: NaN log-likelihood at "
+                                     f"{dict(zip(self.names, bad))} (a bug in the forward function)")
+        if n_in == len(theta):
+            return lp + ll
+        out = np.full(len(theta), -np.inf)
+        out[inside] = lp[inside] + ll
         return out
 
     def __call__(self, z):
         """log posterior density of the sampled coordinates z (k, d), Jacobian included."""
-        z = np.atleast_2d(z)
-        return self.log_density(self.to_theta(z)) + self.log_jacobian(z)
+        plain = self._to_plain(np.atleast_2d(np.asarray(z, dtype=float)))
+        with np.errstate(over="ignore"):
+            theta = np.where(self._log, np.exp(plain), plain)
+        return self.log_density(theta) + np.sum(np.where(self._log, plain, 0.0), axis=-1)
 
     # ---- helpers for optimisers and nested sampling --------------------------------------
     def prior_transform(self, u):

@@ -1,8 +1,11 @@
 """emcee, run until converged: vectorised ensemble, DE + snooker moves, walkers from the Laplace ball.
 
-Moves measured on the electroadhesion posterior (32 walkers, bench notes in bench/README.md):
-DE 0.5 + snooker 0.5 converged in 9.3k steps (tau 127); DE 0.8 + snooker 0.2 in 18k (tau 166);
-DE alone and the stretch move had not converged after 30k steps (tau ~560-600).
+Moves measured on the shipped electroadhesion posterior (32 walkers, same seed): with emcee
+3.1.6's own DESnookerMove the runs looked fast but sampled a too-narrow distribution (that
+move underestimates variances by ~25% on a 5-D Gaussian; see skinfit/moves.py). With the
+corrected snooker and the card's (phi, d_air) shear: DE 0.8 + snooker 0.2 converged in 11.6k
+steps (tau_max 127, 25 s); DE 0.5 + snooker 0.5 in 14.5k (tau_max 155, 38 s). Without the
+shear, 64 walkers needed 55k steps (tau_max 527).
 
 Convergence (see NOTES: walkers are not independent chains): after discarding a burn-in of
 ``burn_factor`` integrated autocorrelation times, the kept chain must be at least
@@ -19,6 +22,8 @@ import arviz as az
 import emcee
 import numpy as np
 from emcee.autocorr import integrated_time
+
+from .moves import default_moves
 
 __all__ = ["SamplerRun", "run_emcee", "initial_ball"]
 
@@ -65,7 +70,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     """Run emcee from walkers ``p0`` (nwalkers, d) until converged or ``max_steps``."""
     t0 = time.perf_counter()
     nwalkers, d = p0.shape
-    moves = moves if moves is not None else [(emcee.moves.DEMove(), 0.5), (emcee.moves.DESnookerMove(), 0.5)]
+    moves = moves if moves is not None else default_moves()
     sampler = emcee.EnsembleSampler(nwalkers, d, post, vectorize=True, moves=moves, backend=backend)
     seed = int(rng.integers(2**32 - 1))
     state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
