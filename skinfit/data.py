@@ -31,6 +31,7 @@ class Column:
     kind: str  # "quantity" | "category"
     optional: bool = False
     signed: bool = False
+    missing_when: tuple | None = None  # (header, label): missing by design exactly on those rows
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,8 +96,22 @@ def _columns(doc, where):
                                  field=prefix + "unit")
         cols.append(Column(header, require(spec, "name", str, where, field_prefix=prefix, default=header),
                            unit, kind, require(spec, "optional", bool, where, field_prefix=prefix, default=False),
-                           require(spec, "signed", bool, where, field_prefix=prefix, default=False)))
+                           require(spec, "signed", bool, where, field_prefix=prefix, default=False),
+                           _missing_when(spec, where, prefix, table)))
     return tuple(cols)
+
+
+def _missing_when(spec, where, prefix, table):
+    """``missing_when = {column = "texture", equals = "flat"}``: blank exactly on those rows."""
+    cond = require(spec, "missing_when", dict, where, field_prefix=prefix, default=None)
+    if cond is None:
+        return None
+    column = require(cond, "column", str, where, field_prefix=prefix + "missing_when.")
+    equals = require(cond, "equals", str, where, field_prefix=prefix + "missing_when.")
+    if column not in table:
+        raise InputError(where, f"names column {column!r}, which is not declared under [columns]",
+                         field=prefix + "missing_when.column")
+    return (column, equals)
 
 
 def load_dataset(name):
@@ -163,7 +178,21 @@ def read_table(raw, columns, where):
             i = int(np.argmax(bad))
             raise InputError(where, f"expected a number in {col.unit} (got {text.iloc[i]!r})",
                              field=field, row=i + 1)
-        if np.isnan(values).any() and not col.optional:
+        if col.missing_when:
+            other, label = col.missing_when
+            if other not in table.columns:
+                raise InputError(where, "missing column (the card declares it)", field=f"column {other!r}")
+            by_design = (table[other].str.strip() == label).to_numpy()
+            absent = np.isnan(values)
+            if (absent & ~by_design).any():
+                i = int(np.argmax(absent & ~by_design))
+                raise InputError(where, f"missing value (expected a number in {col.unit}; only rows with "
+                                 f"{other} = {label!r} leave it empty by design)", field=field, row=i + 1)
+            if (~absent & by_design).any():
+                i = int(np.argmax(~absent & by_design))
+                raise InputError(where, f"expected no value on a row with {other} = {label!r} (missing "
+                                 f"by design; got {text.iloc[i]!r})", field=field, row=i + 1)
+        elif np.isnan(values).any() and not col.optional:
             i = int(np.argmax(np.isnan(values)))
             raise InputError(where, f"missing value (expected a number in {col.unit}; declare "
                              f"`optional = true` if it is missing by design)", field=field, row=i + 1)

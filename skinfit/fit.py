@@ -22,7 +22,7 @@ from .data import Dataset, load_dataset
 from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
 from .optimize import find_map, laplace_covariance
-from .posterior import Posterior
+from .posterior import Posterior, _level_labels
 from .priors import PriorSet, load_priors
 from .sampling import initial_ball, run_emcee
 
@@ -162,8 +162,45 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
     return az.from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
                          "log_likelihood": loglik, "posterior_predictive": ppc,
-                         "observed_data": observed, "constant_data": constant},
+                         "observed_data": observed, "constant_data": constant,
+                         **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
                         dims=dims, coords=coords, attrs={"/": attrs})
+
+
+def _derived_group(post, theta, nw, nd, dims, coords, attrs):
+    """The card's ``[derived]`` quantities on every draw: one value per level of its ``over``
+    columns (and of the columns parameters are split by), as a ``derived`` group."""
+    spec = post.model.derived
+    if not spec:
+        return {}
+    attrs["derived"] = json.dumps({"function": spec["function"], "quantities": dict(spec["quantities"])})
+    cols = list(spec["over"]) + [c for cs in post.split.values() for c in cs if c not in spec["over"]]
+    labels = _level_labels(post.dataset.frame, cols, post.dataset) if cols else ["all"] * post.n
+    levels = list(dict.fromkeys(labels))
+    first = [labels.index(v) for v in levels]
+    out = {}
+    for name, v in post.model.derive(post.unpack(theta), post.x, post.constants).items():
+        v = np.broadcast_to(v, (len(theta), post.n))[:, first]
+        out[name] = v.reshape(nw, nd, len(levels)) if cols else v.reshape(nw, nd)
+        if cols:
+            dims[name] = [",".join(cols)]
+    if cols:
+        coords[",".join(cols)] = levels
+    return {"derived": out}
+
+
+def _derived_summary(tree):
+    """Rows of :meth:`Fit.summary` for the ``derived`` group (no MAP, tau or contraction)."""
+    if "derived" not in tree.children:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        table = az.summary(tree, group="derived", ci_kind="hdi", ci_prob=0.94, round_to="none")
+    table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
+    table.index = [_slot_name(i) for i in table.index]
+    units = json.loads(tree.attrs["derived"])["quantities"]
+    table["note"] = [f"derived [{units[i.split('[')[0]]}]" for i in table.index]
+    return table
 
 
 def _versions():
@@ -252,6 +289,7 @@ class Fit:
         table["tau"] = [sampler["tau"][n] for n in table.index]
         table["contraction"] = contraction
         table["note"] = notes
+        table = pd.concat([table, _derived_summary(self.idata)])
         return table[["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
                       "contraction", "note"]]
 

@@ -65,6 +65,7 @@ class Model:
     split: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     plot: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     shear: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    derived: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     path: str = ""
     sha256: str = ""
     card_text: str = ""
@@ -95,6 +96,15 @@ class Model:
             c.update(constants)
         y, ok = self.forward(params, covariates, c)
         return y, ok
+
+    def derive(self, params, covariates, constants=None):
+        """Derived quantities of the card's ``[derived]`` table: dict name -> array (k, n)."""
+        c = {**self.constants, **(constants or {})}
+        out = _forward_cached(self.derived["function"], self.path)(params, covariates, c)
+        if set(out) != set(self.derived["quantities"]):
+            raise InputError(self.path, f"{self.derived['function']} returns {sorted(out)}, the card "
+                             f"declares {sorted(self.derived['quantities'])}", field="derived.quantities")
+        return out
 
     def predict(self, params, data, *, constants=None, return_valid=False):
         """Predicted observable(s) at the covariates of ``data``.
@@ -224,6 +234,7 @@ def _parse_model_text(text, where, digest):
         plot=MappingProxyType(dict(require(doc, "plot", dict, where, default={}))),
         shear=MappingProxyType(dict(require(require(doc, "sampling", dict, where, default={}),
                                             "shear", dict, where, field_prefix="sampling.", default={}))),
+        derived=_derived_table(doc, where),
         path=where,
         sha256=digest,
         card_text=text,
@@ -240,6 +251,20 @@ def _parse_model_text(text, where, digest):
                              f"(got {pname} = {ref!r})", field=f"sampling.shear.{pname}")
         resolve_forward(ref, where)
     return model
+
+
+def _derived_table(doc, where):
+    """``[derived]``: function = "skinfit.physics.<module>:<function>", over = [columns],
+    quantities = {name = unit}; quantities evaluated on the posterior draws of a fit."""
+    table = require(doc, "derived", dict, where, default={})
+    if not table:
+        return MappingProxyType({})
+    ref = require(table, "function", str, where, field_prefix="derived.")
+    resolve_forward(ref, where)
+    quantities = require(table, "quantities", dict, where, field_prefix="derived.")
+    over = require(table, "over", list, where, field_prefix="derived.", default=[])
+    return MappingProxyType({"function": ref, "over": tuple(over),
+                             "quantities": MappingProxyType(dict(quantities))})
 
 
 def _display(path):

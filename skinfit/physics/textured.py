@@ -1,0 +1,119 @@
+"""Finger pad friction on micro-textured silicone (seed 002; MODELS.md section 3).
+
+Friction coefficient of eq. 16, ``mu = tau0*A_r/F + alpha + beta_h*(9/(128*R_e))**(2/3)*(F/E0)**(1/3)``,
+with the real contact area ``A_r`` of a finger pad on a square array of spherical-tipped
+asperities.  skinfit reads the paper's Section 3 analytically: the numerical half-space step is
+replaced by Hertz contact of each asperity (MODELS.md).  Below a critical mean pressure the skin
+rests on the asperity tips only; above it, a central zone of the apparent (ridge) contact
+``A_ac = k_a*F**m_a`` touches the flat between the asperities (the transition of eqs. 9-14).
+
+A flat reference sample has no texture geometry: its three texture covariates are NaN (missing
+by design) and ``A_r = A_ac``.
+"""
+
+import numpy as np
+
+__all__ = [
+    "reduced_modulus",
+    "critical_load",
+    "contact_state",
+    "textured_surface",
+    "textured_no_transition",
+    "textured_no_hysteresis",
+]
+
+_TEXTURE = ("asperity_radius", "asperity_height", "asperity_spacing")
+
+
+def reduced_modulus(E_skin, E_m, c):
+    """Reduced modulus ``1/((1-nu_skin**2)/E_skin + (1-nu_m**2)/E_m)`` [Pa] (seed 002, eqs. 3, 13)."""
+    return 1.0 / ((1.0 - c["nu_skin"] ** 2) / E_skin + (1.0 - c["nu_m"] ** 2) / E_m)
+
+
+def critical_load(E_skin_micro, sample_modulus, asperity_radius, asperity_height, asperity_spacing,
+                  k_a, m_a, c):
+    """Normal load F_crit [N] at which the transition to full contact starts (eq. 14, seed 002).
+
+    Eq. 14, ``F_crit = 8*sqrt(h**3*R_asp)/(9*lambda**2) * A_ac * E1``, with the apparent area
+    ``A_ac = k_a*F_crit**m_a`` evaluated at F_crit itself, solved in closed form:
+    ``F_crit = (8*sqrt(h**3*R_asp)*k_a*E1/(9*lambda**2))**(1/(1 - m_a))`` (needs ``m_a < 1``).
+    All arguments broadcast; SI units.
+    """
+    e1 = reduced_modulus(E_skin_micro, sample_modulus, c)
+    g = 8.0 * np.sqrt(asperity_height**3 * asperity_radius) / (9.0 * asperity_spacing**2) * k_a * e1
+    return g ** (1.0 / (1.0 - m_a))
+
+
+def contact_state(p, x, c, *, transition=True):
+    """Contact areas and pressures of the analytic reading of seed 002, Section 3.
+
+    Parameters ``E_skin_micro`` [Pa], ``k_a`` [m^2/N^m_a], ``m_a`` [-] (arrays broadcastable to
+    (k, n)); covariates ``normal_force`` F [N], ``sample_modulus`` [Pa], ``asperity_radius``,
+    ``asperity_height``, ``asperity_spacing`` [m] (NaN on a flat reference), each (n,).
+
+    Returns a dict of (k, n) arrays: ``A_ac`` apparent area [m^2]; ``pbar`` mean apparent
+    pressure F/A_ac [Pa]; ``x`` the full-contact fraction A_trans/A_ac (eq. 9; 0 when
+    ``transition`` is False and on a flat reference); ``p_trans``, ``p_asp`` mean pressures of
+    the full-contact and asperity zones [Pa] (eqs. 11-12 in closed form: pbar*(1-(1-x)**1.5)/x
+    and pbar*sqrt(1-x); p_trans = 1.5*pbar as x -> 0); ``A_r`` real contact area [m^2]; and
+    ``flat`` (bool, (n,)) and ``ok`` (bool, (n,): texture geometry either complete or all
+    missing, and F > 0).
+    """
+    f = np.asarray(x["normal_force"], dtype=float)
+    geo = [np.asarray(x[k], dtype=float) for k in _TEXTURE]
+    missing = [np.isnan(g) for g in geo]
+    flat = missing[0] & missing[1] & missing[2]
+    ok = (missing[0] == missing[1]) & (missing[1] == missing[2]) & (f > 0)
+    r_asp, h, lam = (np.where(m, 1.0, g) for m, g in zip(missing, geo))  # harmless fill
+    f_safe = np.where(f > 0, f, 1.0)
+    e1 = reduced_modulus(p["E_skin_micro"], x["sample_modulus"], c)
+    a_ac = p["k_a"] * f_safe ** p["m_a"]
+    pbar = f_safe / a_ac
+    f_i = pbar * lam**2  # mean force per asperity, eq. 6
+    if transition:
+        f_crit = (4.0 / 3.0) * e1 * np.sqrt(r_asp) * h**1.5  # Hertz force at indentation h, eq. 13
+        frac = np.clip(1.0 - (2.0 * f_crit / (3.0 * f_i)) ** 2, 0.0, 1.0)  # eq. 9
+    else:
+        frac = np.zeros(np.broadcast_shapes(np.shape(f_i), np.shape(e1)))
+    frac = np.where(flat, 0.0, frac)
+    one_minus = 1.0 - frac
+    p_asp = pbar * np.sqrt(one_minus)  # eq. 12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p_trans = np.where(frac > 0, pbar * (1.0 - one_minus**1.5) / frac, 1.5 * pbar)  # eq. 11
+    a_i = np.cbrt(3.0 * p_asp * lam**2 * r_asp / (4.0 * e1))  # Hertz radius of one asperity contact
+    cell = np.minimum(1.0, np.pi * a_i**2 / lam**2)
+    a_r = a_ac * np.where(flat, 1.0, frac + one_minus * cell)
+    return {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_trans": p_trans, "p_asp": p_asp, "A_r": a_r,
+            "flat": flat, "ok": ok}
+
+
+def _friction(p, x, c, *, transition, hysteresis):
+    s = contact_state(p, x, c, transition=transition)
+    f = np.where(s["ok"], x["normal_force"], 1.0)
+    mu = p["tau0"] * s["A_r"] / f + p["alpha"]
+    if hysteresis:
+        e0 = reduced_modulus(p["E_fingerpad"], x["sample_modulus"], c)
+        mu = mu + p["beta_h"] * (9.0 / (128.0 * c["R_e"])) ** (2.0 / 3.0) * np.cbrt(f / e0)  # eq. 15/F
+    return {"friction_coefficient": np.atleast_2d(np.where(s["ok"], mu, 0.0))}, s["ok"]
+
+
+def textured_surface(p, x, c):
+    """Dynamic friction coefficient [-] of a finger pad on textured silicone (eq. 16, seed 002).
+
+    Parameters ``E_skin_micro`` [Pa], ``E_fingerpad`` [Pa], ``tau0`` [Pa], ``alpha`` [-],
+    ``beta_h`` [-], ``k_a`` [m^2/N^m_a], ``m_a`` [-]; covariates ``normal_force`` [N],
+    ``sample_modulus`` [Pa] and the texture geometry [m] (NaN on a flat reference); constants
+    ``R_e`` [m], ``nu_skin``, ``nu_m``.  Outside the support: F <= 0, or a row whose texture
+    geometry is only partly given.
+    """
+    return _friction(p, x, c, transition=True, hysteresis=True)
+
+
+def textured_no_transition(p, x, c):
+    """As :func:`textured_surface` with the skin on the asperity tips at every load (x = 0)."""
+    return _friction(p, x, c, transition=False, hysteresis=True)
+
+
+def textured_no_hysteresis(p, x, c):
+    """As :func:`textured_surface` without the hysteresis term (beta_h = 0; no ``E_fingerpad``)."""
+    return _friction(p, x, c, transition=True, hysteresis=False)
