@@ -8,8 +8,10 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
+from .compare import compare
 from .data import Dataset, list_datasets, load_dataset
 from .errors import ConvergenceWarning, InputError, SupportWarning
+from .evidence import evidence
 from .fit import Fit, fit, load_fit
 from .models import Model, list_models, load_model
 from .priors import PriorSet, list_priors, load_priors
@@ -27,6 +29,8 @@ __all__ = [
     "Model",
     "PriorSet",
     "SupportWarning",
+    "compare",
+    "evidence",
     "fit",
     "list_datasets",
     "list_models",

@@ -1,0 +1,7 @@
+"""``python -m skinfit``: the command line (same as the ``skinfit`` script)."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())

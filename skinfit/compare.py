@@ -1,0 +1,83 @@
+"""``skinfit.compare``: fits of the same data ranked by evidence, with Bayes factors and LOO."""
+
+import json
+import math
+import warnings
+from pathlib import Path
+
+import arviz as az
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from .errors import InputError
+from .evidence import evidence
+from .evidence_methods import bayes_factor_strength
+
+__all__ = ["compare", "loo", "cli_compare"]
+
+
+def loo(fit):
+    """PSIS-LOO of a fit (ArviZ); several observables are summed per data row."""
+    tree = fit.idata
+    ll = tree["log_likelihood"].to_dataset()
+    names = list(ll.data_vars)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if len(names) == 1:
+            return az.loo(tree, var_name=names[0])
+        total = sum(ll[n] for n in names)
+        combined = tree.copy()
+        combined["log_likelihood"] = xr.DataTree(xr.Dataset({"total": total}))
+        return az.loo(combined, var_name="total")
+
+
+def compare(fits, *, method="bridge", rng=None):
+    """One table ranked by log evidence: log Z +- se, log Bayes factor against the best with its
+    error and strength in words (Kass & Raftery 1995), and PSIS-LOO elpd +- se with the number of
+    Pareto k > 0.7.  Refuses fits made on different data.
+    """
+    fits = list(fits)
+    if len(fits) < 2:
+        raise InputError("compare", "need at least two fits to compare")
+    hashes = {f.idata.attrs["dataset_sha256"] for f in fits}
+    if len(hashes) > 1:
+        described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.idata.attrs['dataset_sha256'][:12]})" for f in fits)
+        raise InputError("compare", f"fits were made on different data and cannot be compared: {described}")
+    rows = []
+    for f in fits:
+        ev = evidence(f, method=method, rng=rng)
+        lo = loo(f)
+        k = np.asarray(lo.pareto_k).ravel()
+        rows.append({"model": f.model_id, "log_z": ev.log_z, "log_z_se": ev.se, "method": ev.method,
+                     "approximate": ev.approximate, "elpd_loo": float(lo.elpd), "elpd_loo_se": float(lo.se),
+                     "p_loo": float(lo.p), "pareto_k_gt_0.7": int((k > 0.7).sum()),
+                     "converged": f.converged})
+    table = pd.DataFrame(rows).sort_values("log_z", ascending=False).reset_index(drop=True)
+    best = table.iloc[0]
+    table["log_bf_vs_best"] = table["log_z"] - best["log_z"]
+    table["log_bf_se"] = np.sqrt(table["log_z_se"] ** 2 + best["log_z_se"] ** 2)
+    table.loc[0, "log_bf_se"] = 0.0
+    table["strength"] = ["best" if i == 0 else f"{bayes_factor_strength(-lbf)} for {best['model']}"
+                         for i, lbf in enumerate(table["log_bf_vs_best"])]
+    table.index = table.pop("model")
+    return table[["log_z", "log_z_se", "log_bf_vs_best", "log_bf_se", "strength", "elpd_loo", "elpd_loo_se",
+                  "p_loo", "pareto_k_gt_0.7", "method", "approximate", "converged"]]
+
+
+def cli_compare(args):
+    from .fit import load_fit
+
+    paths = [Path(r) / "fit.nc" if Path(r).is_dir() else Path(r) for r in args.runs]
+    fits = [load_fit(p) for p in paths]
+    table = compare(fits, method=args.method)
+    for f, p in zip(fits, paths):  # keep the evidence with the fit for reports and campaigns
+        f.save(p)
+    if args.json:
+        print(table.reset_index().to_json(orient="records", indent=2))
+    else:
+        with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
+            print(table.to_string())
+        print("\nlog Z: natural-log evidence +- standard error; log_bf_vs_best = ln(Z/Z_best); "
+              "strength on 2 ln BF (Kass & Raftery 1995); elpd_loo: PSIS-LOO (ArviZ)")
+    return 0

@@ -1,0 +1,934 @@
+"""Figures for papers, drawn from saved results only (a :class:`~skinfit.Fit` or its DataTree).
+
+Posterior-predictive plots in each model's natural axes (:func:`plot_ppc`): the data over the
+50% and 90% posterior-predictive bands and the posterior median curve, one panel per condition,
+axes in the units the data came in. Inference plots: :func:`plot_pair` (corner),
+:func:`plot_trace` (walker traces with rank histograms), :func:`plot_rank` (ArviZ),
+:func:`plot_prior_posterior` (what the data determined), :func:`plot_forest` (a parameter
+across subjects and conditions, with the population distribution when given) and
+:func:`plot_comparison` (evidence / LOO chart).
+
+Every function returns a :class:`matplotlib.figure.Figure` and writes it to ``path`` when one
+is given. Figures are made without pyplot (nothing is ever shown); where ArviZ is used, the
+Agg backend is selected unless the user already chose one (``MPLBACKEND`` or an explicit
+``matplotlib.use``).
+
+Panels and colours come from the model card's optional ``[plot]`` table::
+
+    [plot]
+    x = "normal_force"          # covariate on the x axis (default: the first covariate)
+    panels = ["voltage"]        # one panel per level (combination) of these columns
+    colours = ["material"]      # optional: one colour per level within a panel
+    xscale = "linear"           # or "log"; yscale likewise
+    yscale = "linear"
+    reference = "ball_bearing"  # optional reference curve (default: when the data allow it)
+    pair = ["impedance", "contact_area"]   # two observables: x, y of the extra row
+
+Without a ``[plot]`` table, panels are the columns of the data (other than x) with 2-12 levels.
+A numeric panel column with more than 12 distinct values is cut into three ranges (e.g. load
+ranges).
+"""
+
+import math
+import os
+import re
+import tomllib
+import warnings
+from pathlib import Path
+
+import matplotlib
+import matplotlib.ticker
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from .errors import InputError
+from .units import UNITS, to_si
+
+__all__ = ["plot_ppc", "ppc_bands", "plot_spec", "plot_pair", "plot_trace", "plot_rank",
+           "plot_prior_posterior", "plot_forest", "plot_comparison", "parameter_units", "axis_label"]
+
+#: Central posterior-predictive bands drawn by :func:`plot_ppc` and returned by :func:`ppc_bands`.
+QUANTILES = (0.05, 0.25, 0.5, 0.75, 0.95)
+_BAND_COLUMNS = ("q05", "q25", "q50", "q75", "q95")
+_MAX_PANELS = 12
+_MAX_PANELS_MULTI = 6
+_MAX_LEVELS = 12  # a numeric panel column with more distinct values is cut into ranges
+_N_CURVE_DRAWS = 300
+_N_GRID = 160
+_MAX_PAIR = 10
+_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
+            "#17becf", "#7f7f7f", "#bcbd22")
+_DPI = 120
+
+
+def _ensure_backend():
+    """Agg unless the user chose a backend (MPLBACKEND or matplotlib.use); for ArviZ's pyplot."""
+    chosen = getattr(matplotlib.rcParams, "_get_backend_or_none", lambda: "unknown")()
+    if os.environ.get("MPLBACKEND") is None and chosen is None:
+        matplotlib.use("Agg")
+
+
+# ---- reading a saved fit ------------------------------------------------------------------
+def _as_fit(obj):
+    from .fit import Fit, load_fit
+
+    if isinstance(obj, Fit):
+        return obj
+    if isinstance(obj, (str, Path)):
+        return load_fit(obj)
+    if hasattr(obj, "attrs") and "model_id" in getattr(obj, "attrs", {}):
+        return Fit(obj)
+    raise TypeError(f"expected a skinfit Fit, its DataTree or a path to fit.nc (got {type(obj).__name__})")
+
+
+def _card(fit):
+    return tomllib.loads(fit.idata.attrs["model_card"])
+
+
+def _group(fit, name):
+    return fit.idata[name].to_dataset()
+
+
+def _data_units(fit):
+    """Column -> unit the data came in (dataset card), falling back to the model card's SI unit."""
+    card = _card(fit)
+    units = {q["name"]: q["unit"] for key in ("observables", "covariates") for q in card.get(key, [])}
+    units.update(fit.attr("units"))
+    return units
+
+
+def _factor(unit):
+    """Factor from SI to ``unit`` (divide SI values by it); 1 for units skinfit does not convert."""
+    return to_si(unit) if unit in UNITS else 1.0
+
+
+def axis_label(name, unit=None):
+    """``"normal_force", "mN"`` -> ``"normal force [mN]"``; dimensionless -> ``[-]``."""
+    text = name.replace("_", " ")
+    return text if unit is None else f"{text} [{_unit_text(unit)}]"
+
+
+def _unit_text(unit):
+    return "-" if unit in ("1", "-", "") else unit
+
+
+def parameter_units(fit):
+    """Parameter (or noise parameter) name -> SI unit as stated in the model card."""
+    fit = _as_fit(fit)
+    card = _card(fit)
+    units = {p["name"]: p["unit"] for p in card.get("parameters", [])}
+    obs_units = {o["name"]: o["unit"] for o in card.get("observables", [])}
+    setup = fit.attr("setup")
+    observables = setup["observables"]
+    for o in observables:
+        suffix = "" if len(observables) == 1 else f"_{o}"
+        units[f"sigma{suffix}"] = "1" if setup["noise"].get(o) == "lognormal" else obs_units.get(o, "1")
+        units[f"nu{suffix}"] = "1"
+    return units
+
+
+def _slots(fit):
+    """The sampled scalars: name, base, level, unit, and whether plotted on a log axis."""
+    from .fit import _priors_from_attrs
+
+    priors = _priors_from_attrs(fit.idata)
+    units = parameter_units(fit)
+    out = []
+    for s in fit.attr("slots"):
+        prior = priors.get(s["base"])
+        out.append({**s, "unit": units.get(s["base"]), "prior": prior,
+                    "log": prior is not None and prior.lower >= 0})
+    return out
+
+
+def _use_log(slot, values):
+    """Log axis for a positive parameter whose values span more than a factor of 10."""
+    values = np.asarray(values, dtype=float)
+    return bool(slot["log"] and values.min() > 0 and values.max() > 10 * values.min())
+
+
+def _log_ticks(ax, which="x", numticks=5):
+    """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
+    on a range of less than 1.5 decades, labelled as plain numbers; no minor tick labels."""
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
+    short = math.log10(hi / lo) < 1.5
+    axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0) if short else (1.0,),
+                                                        numticks=3 * numticks if short else numticks))
+    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+
+
+def _values(ds, slot):
+    """(chain, draw) values of one slot from a posterior/prior Dataset."""
+    da = ds[slot["base"]]
+    if slot["level"] is not None:
+        dim = [d for d in da.dims if d not in ("chain", "draw")][0]
+        da = da.sel({dim: slot["level"]})
+    return np.asarray(da.transpose("chain", "draw").values, dtype=float)
+
+
+def _finish(fig, path):
+    if path is not None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=_DPI)
+    return fig
+
+
+def _new_figure(width, height):
+    return Figure(figsize=(width, height), layout="constrained")
+
+
+# ---- posterior-predictive plots -----------------------------------------------------------
+def plot_spec(fit):
+    """What :func:`plot_ppc` draws: x column, panel and colour columns, scales, reference.
+
+    Read from the model card's ``[plot]`` table, with defaults from the data.
+    """
+    fit = _as_fit(fit)
+    card = _card(fit)
+    table = dict(card.get("plot", {}))
+    cd = _group(fit, "constant_data")
+    observables = list(_group(fit, "observed_data").data_vars)
+    covariates = [c["name"] for c in card.get("covariates", [])]
+    x = table.get("x") or next((c for c in covariates if c in cd), None)
+    if x is None:
+        x = next((c for c in cd.data_vars if np.issubdtype(cd[c].dtype, np.number)), None)
+    if x is None or x not in cd:
+        raise InputError(f"model card {fit.model_id}", f"plot.x: no column {x!r} in the saved data "
+                         f"(columns: {', '.join(cd.data_vars)})", field="plot.x")
+
+    def _columns(key):
+        value = table.get(key)
+        if value is None:
+            return None
+        value = [value] if isinstance(value, str) else list(value)
+        return [c for c in value if c in cd and c != x]  # a column the data lack: nothing to split by
+
+    panels = _columns("panels")
+    colours = _columns("colours") or _columns("colors") or []
+    if panels is None:
+        ordered = covariates + [c for c in cd.data_vars if c not in covariates]
+        panels = [c for c in ordered if c in cd and c != x and c not in colours
+                  and 2 <= _n_levels(cd[c].values) <= _MAX_PANELS]
+    limit = _MAX_PANELS if len(observables) == 1 else _MAX_PANELS_MULTI
+    while len(panels) > 1 and _n_combinations(cd, panels) > limit:
+        colours.insert(0, panels.pop())  # too many panels: the last panel column becomes colour
+    if panels and _n_combinations(cd, panels) > limit and not colours:
+        colours, panels = panels, []
+    reference = table.get("reference")
+    if reference is None and {"position", "amplitude", "wavelength"} <= set(cd.data_vars):
+        reference = "ball_bearing"
+    pair = table.get("pair")
+    if pair is None and len(observables) == 2:
+        pair = [observables[1], observables[0]]
+    return {"x": x, "panels": panels, "colours": colours, "observables": observables,
+            "xscale": table.get("xscale", "linear"), "yscale": table.get("yscale", "linear"),
+            "reference": None if reference in (None, "none") else reference,
+            "pair": list(pair) if pair else None}
+
+
+def _n_levels(values):
+    return len(pd.unique(pd.Series(values)))
+
+
+def _n_combinations(cd, columns):
+    return len(pd.DataFrame({c: cd[c].values for c in columns}).drop_duplicates())
+
+
+def _levels(fit, column, units):
+    """Codes (n,) and labels of a panel/colour column, in data units, NaN as 'none'."""
+    values = _group(fit, "constant_data")[column].values
+    unit = units.get(column)
+    numeric = np.issubdtype(values.dtype, np.number)
+    if not numeric:
+        labels = sorted(pd.unique(pd.Series(values).astype(str)))
+        codes = np.array([labels.index(str(v)) for v in values])
+        return codes, [f"{column.replace('_', ' ')} = {lab}" for lab in labels]
+    shown = values.astype(float) / _factor(unit) if unit else values.astype(float)
+    suffix = "" if unit in (None, "1", "-") else f" {unit}"
+    finite = np.unique(shown[np.isfinite(shown)])
+    has_nan = bool(np.isnan(shown).any())
+    name = column.replace("_", " ")
+    if len(finite) > _MAX_LEVELS:  # a continuous column: three ranges of equal counts
+        edges = np.quantile(shown[np.isfinite(shown)], [0, 1 / 3, 2 / 3, 1])
+        inner = np.clip(np.searchsorted(edges[1:-1], shown, side="right"), 0, 2)
+        codes = np.where(np.isnan(shown), 0, inner + (1 if has_nan else 0))
+        labels = ([f"{name}: none"] if has_nan else []) + [
+            f"{name} {edges[i]:.3g}–{edges[i + 1]:.3g}{suffix}" for i in range(3)]
+        return codes, labels
+    codes = np.searchsorted(finite, shown) + (1 if has_nan else 0)
+    codes = np.where(np.isnan(shown), 0, codes)
+    labels = ([f"{name} = none"] if has_nan else []) + [f"{name} = {v:g}{suffix}" for v in finite]
+    return codes, labels
+
+
+def _keys(fit, columns, units):
+    """Combined level code per row and the label of each combination present."""
+    n = _group(fit, "observed_data").sizes["obs_id"]
+    if not columns:
+        return np.zeros(n, dtype=int), [""]
+    parts = [_levels(fit, c, units) for c in columns]
+    combos = list(zip(*[codes for codes, _ in parts]))
+    present = sorted(set(combos))
+    index = {k: i for i, k in enumerate(present)}
+    labels = [", ".join(parts[j][1][k[j]] for j in range(len(columns))) for k in present]
+    return np.array([index[k] for k in combos]), labels
+
+
+def _ppc_draws(fit, observable, max_draws=20000):
+    arr = _group(fit, "posterior_predictive")[observable].transpose("chain", "draw", "obs_id").values
+    arr = arr.reshape(-1, arr.shape[-1])
+    if len(arr) > max_draws:
+        arr = arr[np.linspace(0, len(arr) - 1, max_draws).astype(int)]
+    return arr
+
+
+def ppc_bands(fit):
+    """Per observation: x, observed and the 5/25/50/75/95% posterior-predictive quantiles.
+
+    Returns a long DataFrame with columns ``observable, obs_id, x, observed, q05, q25, q50,
+    q75, q95, panel, colour`` (``panel``/``colour`` are level codes of :func:`plot_spec`'s
+    columns, labels in ``df.attrs``); values in the units the data came in. The 50% band is
+    [q25, q75], the 90% band [q05, q95]: the bands :func:`plot_ppc` draws.
+    """
+    fit = _as_fit(fit)
+    spec = plot_spec(fit)
+    units = _data_units(fit)
+    cd = _group(fit, "constant_data")
+    od = _group(fit, "observed_data")
+    x = np.asarray(cd[spec["x"]].values, dtype=float) / _factor(units.get(spec["x"]))
+    panel, panel_labels = _keys(fit, spec["panels"], units)
+    colour, colour_labels = _keys(fit, spec["colours"], units)
+    frames = []
+    for o in spec["observables"]:
+        f = _factor(units.get(o))
+        q = np.nanquantile(_ppc_draws(fit, o), QUANTILES, axis=0) / f
+        frame = pd.DataFrame({"observable": o, "obs_id": od["obs_id"].values, "x": x,
+                              "observed": od[o].values / f, "panel": panel, "colour": colour})
+        for name, row in zip(_BAND_COLUMNS, q):
+            frame[name] = row
+        frames.append(frame)
+    out = pd.concat(frames, ignore_index=True)
+    out.attrs.update(panel_labels=panel_labels, colour_labels=colour_labels, spec=spec)
+    return out
+
+
+def _theta_draws(fit, post, n):
+    """(n, d) natural parameter vectors evenly spread over the posterior draws."""
+    ds = _group(fit, "posterior")
+    cols = [_values(ds, {"base": s.base, "level": s.level}).ravel() for s in post.slots]
+    theta = np.column_stack(cols)
+    if len(theta) > n:
+        theta = theta[np.linspace(0, len(theta) - 1, n).astype(int)]
+    return theta
+
+
+def _median_curves(fit, spec, keys):
+    """Posterior median of the noiseless prediction per (panel, colour) group.
+
+    On a fine x grid when, within the group, every other covariate and every (split)
+    parameter is constant; else at the observed x. Returns {group: (x_si, {obs: y_si})}.
+    """
+    post = fit.posterior
+    theta = _theta_draws(fit, post, _N_CURVE_DRAWS)
+    params = post.unpack(theta)
+    x_name = spec["x"]
+    curves = {}
+    for key in sorted(set(keys)):
+        idx = np.flatnonzero(keys == key)
+        grid = x_name in post.x and np.ptp(post.x[x_name][idx]) > 0
+        p_group = {}
+        for name, arr in params.items():
+            if arr.shape[1] == 1:
+                p_group[name] = arr
+            elif np.all(arr[:, idx] == arr[:, idx[:1]]):
+                p_group[name] = arr[:, idx[:1]]
+            else:
+                grid = False
+        for name, values in post.x.items():
+            v = values[idx]
+            if name != x_name and not np.all((v == v[0]) | (np.isnan(v) & np.isnan(v[0]))):
+                grid = False
+        if grid:
+            lo, hi = np.nanmin(post.x[x_name][idx]), np.nanmax(post.x[x_name][idx])
+            xs = np.geomspace(lo, hi, _N_GRID) if spec["xscale"] == "log" and lo > 0 else np.linspace(lo, hi, _N_GRID)
+            cov = {name: (xs if name == x_name else np.full(_N_GRID, values[idx[0]]))
+                   for name, values in post.x.items()}
+            pred, ok = post.model.forward(p_group, cov, post.constants)
+        else:
+            order = idx[np.argsort(post.x[x_name][idx], kind="stable")] if x_name in post.x else idx
+            xs = np.asarray(_group(fit, "constant_data")[x_name].values, dtype=float)[order]
+            pred, ok = post.model.forward(params, post.x, post.constants)
+            pred = {o: np.broadcast_to(v, (len(theta), post.n))[:, order] for o, v in pred.items()}
+            ok = np.broadcast_to(ok, (len(theta), post.n))[:, order] if np.ndim(ok) == 2 else ok
+        out = {}
+        for o in spec["observables"]:
+            y = np.array(np.broadcast_to(pred[o], (len(theta), len(xs))), dtype=float)
+            y[~np.broadcast_to(ok, y.shape)] = np.nan
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN column: outside support
+                out[o] = np.nanmedian(y, axis=0)
+            if not grid:  # replicates at one x (or other covariates varying): their mean
+                out[o] = pd.Series(out[o]).groupby(xs).mean().to_numpy()
+        curves[key] = (xs if grid else np.unique(xs), out)
+    return curves
+
+
+def _ppc_median_curves(fit, bands, keys):
+    """Fallback of :func:`_median_curves`: the posterior-predictive median at the observed x."""
+    units = _data_units(fit)
+    spec = bands.attrs["spec"]
+    fx = _factor(units.get(spec["x"]))
+    curves = {}
+    for key in sorted(set(keys)):
+        idx = np.flatnonzero(keys == key)
+        out, xs = {}, None
+        for o in spec["observables"]:
+            rows = bands[bands["observable"] == o].iloc[idx]
+            med = rows.groupby("x")["q50"].mean() * _factor(units.get(o))
+            xs, out[o] = med.index.to_numpy() * fx, med.to_numpy()
+        curves[key] = (xs, out)
+    return curves
+
+
+def _reference(spec, fit, idx, xs_si):
+    """Reference curve in SI on ``xs_si`` for the rows ``idx``, or None."""
+    if spec["reference"] != "ball_bearing":
+        return None
+    cd = _group(fit, "constant_data")
+    a = np.asarray(cd["amplitude"].values, dtype=float)[idx]
+    lam = np.asarray(cd["wavelength"].values, dtype=float)[idx]
+    if not (np.all(a == a[0]) and np.all(lam == lam[0])):
+        return None
+    k = 2 * math.pi / lam[0]
+    return -a[0] * k * np.sin(k * xs_si)  # MODELS.md 2, eq. 2: ratio = g(x)
+
+
+def _grid(fig, nrows, ncols, n_panels, multi, n_obs):
+    """Axes as rows[r][panel]: multi = one row per observable (+ pair row), y shared per row,
+    x shared down a column; otherwise one row of ``n_panels`` wrapped, all axes shared."""
+    if not multi:
+        axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True).ravel()
+        for ax in axes[n_panels:]:
+            ax.set_visible(False)
+        return [list(axes[:n_panels])]
+    gs = fig.add_gridspec(nrows, ncols)
+    rows = []
+    for r in range(nrows):
+        row = []
+        for c in range(ncols):
+            sharex = rows[0][c] if 0 < r < n_obs else None
+            row.append(fig.add_subplot(gs[r, c], sharex=sharex, sharey=row[0] if c else None))
+        rows.append(row)
+    return rows
+
+
+def plot_ppc(fit, path=None):
+    """Posterior-predictive plot in the model's natural axes.
+
+    Per panel (a level of the card's ``plot.panels`` columns): the data, the 50% and 90%
+    posterior-predictive bands (per observation: quantiles of the ``posterior_predictive``
+    draws) and the posterior median of the noiseless prediction; for models with two
+    observables, one row per observable plus a row of one observable against the other;
+    the wavy-surface ball-bearing curve (eq. 2) for reference when the data allow it.
+    Axes are in the units the data came in.
+
+    Returns the matplotlib Figure (written to ``path`` when given).
+    """
+    fit = _as_fit(fit)
+    bands = ppc_bands(fit)
+    spec = bands.attrs["spec"]
+    units = _data_units(fit)
+    panel_labels, colour_labels = bands.attrs["panel_labels"], bands.attrs["colour_labels"]
+    observables = spec["observables"]
+    first = bands[bands["observable"] == observables[0]]
+    panel = first["panel"].to_numpy()
+    colour = first["colour"].to_numpy()
+    n_panels = len(panel_labels)
+    pair = spec["pair"] if spec["pair"] and all(p in observables for p in spec["pair"]) else None
+    keys = panel * len(colour_labels) + colour
+    try:
+        curves = _median_curves(fit, spec, keys)
+    except InputError:  # the saved card's forward function is not available here
+        curves = _ppc_median_curves(fit, bands, keys)
+
+    multi = len(observables) > 1 or pair is not None
+    if multi:  # one row per observable (+ the pair row), one column per panel
+        ncols, nrows = n_panels, len(observables) + (1 if pair else 0)
+    else:  # one observable: panels wrapped into a near-square grid
+        ncols = min(4, math.ceil(math.sqrt(n_panels)))
+        nrows = math.ceil(n_panels / ncols)
+    fig = _new_figure(min(3.4 * ncols + 2.2, 18), 2.9 * nrows + 0.6)
+    rows = _grid(fig, nrows, ncols, n_panels, multi, len(observables))
+    x_label = axis_label(spec["x"], units.get(spec["x"]))
+    x_factor = _factor(units.get(spec["x"]))
+    multi_colour = len(colour_labels) > 1
+    reference_drawn = False
+    for r, o in enumerate(observables):
+        f = _factor(units.get(o))
+        sub = bands[bands["observable"] == o]
+        for p in range(n_panels):
+            ax = rows[r][p]
+            for c in range(len(colour_labels)):
+                rows_pc = sub[(sub["panel"] == p) & (sub["colour"] == c)]
+                if rows_pc.empty:
+                    continue
+                col = _COLOURS[c % len(_COLOURS)] if multi_colour else _COLOURS[0]
+                agg = rows_pc.groupby("x", sort=True)[list(_BAND_COLUMNS)].mean()
+                xu = agg.index.to_numpy()
+                if len(xu) > 1:
+                    ax.fill_between(xu, agg["q05"], agg["q95"], color=col, alpha=0.16, lw=0, gid="band90")
+                    ax.fill_between(xu, agg["q25"], agg["q75"], color=col, alpha=0.34, lw=0, gid="band50")
+                else:
+                    ax.errorbar(xu, agg["q50"], yerr=[agg["q50"] - agg["q05"], agg["q95"] - agg["q50"]],
+                                color=col, alpha=0.5, lw=3, capsize=0)
+                ax.scatter(rows_pc["x"], rows_pc["observed"], s=12, color=col, edgecolor="black",
+                           linewidth=0.4, zorder=3, gid="data")
+                xs, ys = curves[p * len(colour_labels) + c]
+                ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
+                if r == 0:
+                    idx = np.flatnonzero(keys == p * len(colour_labels) + c)
+                    ref = _reference(spec, fit, idx, xs)
+                    if ref is not None:
+                        ax.plot(xs / x_factor, ref / f, color="0.35", lw=1.1, ls="--", zorder=2, gid="reference")
+                        reference_drawn = True
+            ax.set_xlabel(x_label)
+            ax.set_ylabel(axis_label(o, units.get(o)))
+            ax.set_xscale(spec["xscale"])
+            ax.set_yscale(spec["yscale"])
+            if panel_labels[p] and (r == 0 or len(observables) == 1):
+                ax.set_title(panel_labels[p], fontsize=10)
+    if pair:
+        _draw_pair_row(fit, rows[-1], pair, spec, units, panel, colour, curves, len(colour_labels))
+    for row in rows:
+        for ax in row:
+            ax.grid(alpha=0.25, lw=0.5)
+            for which in "xy":
+                if (ax.get_xscale() if which == "x" else ax.get_yscale()) == "log":
+                    _log_ticks(ax, which)
+    if not multi:
+        for ax in rows[0]:
+            ax.label_outer()
+    handles = [Line2D([], [], ls="", marker="o", mfc="0.5", mec="black", mew=0.4, ms=4, label="data"),
+               Line2D([], [], color="0.2", lw=1.6, label="posterior median"),
+               Patch(color="0.2", alpha=0.34, label="50% predictive"),
+               Patch(color="0.2", alpha=0.16, label="90% predictive")]
+    if pair:
+        handles.append(Line2D([], [], ls="", marker="o", mfc=_COLOURS[0], mec="none", alpha=0.4, ms=3,
+                              label="predictive draws (pairs)"))
+    if reference_drawn:
+        handles.append(Line2D([], [], color="0.35", ls="--", lw=1.1, label="ball bearing, g(x) (eq. 2)"))
+    if multi_colour:
+        handles += [Patch(color=_COLOURS[c % len(_COLOURS)], label=lab) for c, lab in enumerate(colour_labels)]
+    fig.legend(handles=handles, loc="outside right upper", fontsize=9, frameon=False)
+    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: posterior predictive", fontsize=11)
+    return _finish(fig, path)
+
+
+def _draw_pair_row(fit, axes, pair, spec, units, panel, colour, curves, n_colours):
+    """One observable against the other: data, joint predictive draws, median curve."""
+    xo, yo = pair
+    od = _group(fit, "observed_data")
+    fx, fy = _factor(units.get(xo)), _factor(units.get(yo))
+    px, py = _ppc_draws(fit, xo, 20), _ppc_draws(fit, yo, 20)
+    for p, ax in enumerate(axes):
+        for c in range(n_colours):
+            idx = np.flatnonzero((panel == p) & (colour == c))
+            if not len(idx):
+                continue
+            col = _COLOURS[c % len(_COLOURS)] if n_colours > 1 else _COLOURS[0]
+            ax.scatter(px[:, idx].ravel() / fx, py[:, idx].ravel() / fy, s=4, color=col, alpha=0.12,
+                       lw=0, rasterized=True)
+            ax.scatter(od[xo].values[idx] / fx, od[yo].values[idx] / fy, s=12, color=col,
+                       edgecolor="black", linewidth=0.4, zorder=3)
+            _, ys = curves[p * n_colours + c]
+            ax.plot(ys[xo] / fx, ys[yo] / fy, color=col, lw=1.6, zorder=4)
+        ax.set_xlabel(axis_label(xo, units.get(xo)))
+        ax.set_ylabel(axis_label(yo, units.get(yo)))
+        ax.set_xscale(spec["yscale"])
+        ax.set_yscale(spec["yscale"])
+
+
+# ---- inference plots ----------------------------------------------------------------------
+def _param_label(name, unit):
+    """Parameter names are kept as written (``E_star [Pa]``), unlike column labels."""
+    return name if unit is None else f"{name} [{_unit_text(unit)}]"
+
+
+def _slot_label(slot):
+    return _param_label(slot["name"], slot["unit"])
+
+
+def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
+    """Corner plot: marginals on the diagonal, pairwise draws below, the MAP marked.
+
+    Positive parameters on log axes (their sampling coordinate). By default every sampled
+    scalar when there are at most 10, else the parameters not split by a column.
+    """
+    fit = _as_fit(fit)
+    slots = _slots(fit)
+    if var_names is not None:
+        slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
+    elif len(slots) > _MAX_PAIR:
+        slots = [s for s in slots if s["level"] is None][:_MAX_PAIR]
+    ds = _group(fit, "posterior")
+    values = np.column_stack([_values(ds, s).ravel() for s in slots])
+    if len(values) > max_draws:
+        values = values[np.linspace(0, len(values) - 1, max_draws).astype(int)]
+    mapv = fit.map
+    d = len(slots)
+    size = 1.6 * d + 1.0
+    fig = Figure(figsize=(size, size))  # a fixed layout: constrained layout is slow on d*d axes
+    fig.subplots_adjust(left=0.8 / size + 0.02, bottom=0.7 / size + 0.02, right=0.98, top=1 - 0.45 / size,
+                        wspace=0.08, hspace=0.08)
+    gs = fig.add_gridspec(d, d)
+    log = [_use_log(s, values[:, k]) for k, s in enumerate(slots)]
+    axes = np.full((d, d), None, dtype=object)
+    for i in range(d):
+        for j in range(i + 1):
+            ax = axes[i, j] = fig.add_subplot(gs[i, j])
+            si, sj = slots[i], slots[j]
+            if i == j:
+                v = values[:, i]
+                ax.hist(v, bins=np.geomspace(v.min(), v.max(), 40) if log[i] else 40, color=_COLOURS[0],
+                        alpha=0.7)
+                ax.axvline(mapv[si["name"]], color="#d62728", lw=1)
+                if log[i]:
+                    ax.set_xscale("log")
+            else:
+                ax.scatter(values[:, j], values[:, i], s=1.5, alpha=0.25, color=_COLOURS[0], lw=0,
+                           rasterized=True)
+                ax.plot(mapv[sj["name"]], mapv[si["name"]], marker="x", color="#d62728", ms=5)
+                if log[j]:
+                    ax.set_xscale("log")
+                if log[i]:
+                    ax.set_yscale("log")
+            if i == d - 1:
+                ax.set_xlabel(_slot_label(sj), fontsize=8)
+            else:
+                ax.tick_params(labelbottom=False)
+            if j == 0 and i > 0:
+                ax.set_ylabel(_slot_label(si), fontsize=8)
+            else:
+                ax.tick_params(labelleft=False)
+            ax.minorticks_off()
+            ax.tick_params(labelsize=6)
+            for axis in (ax.xaxis, ax.yaxis):
+                if axis.get_scale() != "log":
+                    axis.set_major_locator(matplotlib.ticker.MaxNLocator(3))
+            if i == j:
+                ax.set_yticks([])
+    for j in range(d):  # the x range of each column is its marginal's
+        for i in range(j + 1, d):
+            axes[i, j].set_xlim(axes[j, j].get_xlim())
+    for i in range(1, d):
+        for j in range(i):
+            axes[i, j].set_ylim(axes[i, i].get_xlim())
+    for i in range(d):
+        for j in range(i + 1):
+            for which in "xy":
+                if (axes[i, j].get_xscale() if which == "x" else axes[i, j].get_yscale()) == "log":
+                    _log_ticks(axes[i, j], which, 3)
+    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: posterior draws (MAP in red)", fontsize=11)
+    return _finish(fig, path)
+
+
+def _ranks(x):
+    """Pooled ranks (0..1) of an array of any shape."""
+    flat = x.ravel()
+    r = np.empty(len(flat))
+    r[np.argsort(flat, kind="stable")] = np.arange(len(flat))
+    return (r / max(len(flat) - 1, 1)).reshape(x.shape)
+
+
+def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, max_walkers=8):
+    """Walker traces (left) and rank histograms per walker group (right), one row per parameter.
+
+    emcee walkers are not independent chains; the walkers are cut into ``n_groups`` groups
+    and the ranks of their draws among all draws histogrammed: flat histograms that agree
+    mean the groups sample the same distribution.
+    """
+    fit = _as_fit(fit)
+    slots = _slots(fit)
+    if var_names is not None:
+        slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
+    ds = _group(fit, "posterior")
+    sampler = fit.attr("sampler")
+    fig = _new_figure(10, 1.35 * len(slots) + 0.9)
+    axes = fig.subplots(len(slots), 2, squeeze=False, width_ratios=[3, 1])
+    for i, s in enumerate(slots):
+        v = _values(ds, s)  # (walkers, draws)
+        ax = axes[i, 0]
+        step = max(1, v.shape[1] // max_points)  # the picture of a long chain, at a fraction of the ink
+        shown = np.linspace(0, len(v) - 1, min(len(v), max_walkers)).astype(int)
+        ax.plot(np.arange(0, v.shape[1], step), v[shown, ::step].T, lw=0.6, alpha=0.7)
+        if _use_log(s, v):
+            ax.set_yscale("log")
+            _log_ticks(ax, "y")
+        ax.set_ylabel(_slot_label(s), fontsize=8)
+        ax.tick_params(labelsize=7)
+        ranks = _ranks(v)
+        groups = np.array_split(np.arange(len(v)), min(n_groups, len(v)))
+        bins = np.linspace(0, 1, 21)
+        axr = axes[i, 1]
+        for g, members in enumerate(groups):
+            h, _ = np.histogram(ranks[members].ravel(), bins=bins, density=True)
+            axr.stairs(h, bins, color=_COLOURS[g % len(_COLOURS)], lw=1, baseline=None)
+        axr.axhline(1.0, color="black", lw=0.6, ls=":")
+        axr.set_ylim(0, None)
+        axr.set_yticks([])
+        axr.tick_params(labelsize=7)
+        if i < len(slots) - 1:
+            ax.tick_params(labelbottom=False)
+            axr.tick_params(labelbottom=False)
+    axes[-1, 0].set_xlabel(f"draw (after {sampler['burn']} burn-in steps, thinned by {sampler['thin']}); "
+                           f"{min(len(v), max_walkers)} of {sampler['nwalkers']} walkers shown")
+    axes[-1, 1].set_xlabel(f"rank (fraction), {len(groups)} walker groups")
+    axes[0, 1].set_title("rank histograms (flat = mixed)", fontsize=9)
+    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: traces", fontsize=11)
+    return _finish(fig, path)
+
+
+def plot_rank(fit, path=None, *, var_names=None):
+    """ArviZ's rank ECDF plot (walkers as chains); rank histograms if ArviZ cannot draw it."""
+    fit = _as_fit(fit)
+    _ensure_backend()
+    import arviz_plots as azp
+    import matplotlib.pyplot as plt
+
+    try:
+        pc = azp.plot_rank(fit.idata, var_names=var_names, backend="matplotlib")
+        fig = pc.viz["figure"].item()
+    except (ValueError, KeyError, TypeError):  # e.g. more panels than plot.max_subplots
+        return plot_trace(fit, path, var_names=var_names)
+    plt.close(fig)  # keep pyplot's registry clean; the Figure stays usable
+    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: rank ECDF per walker", fontsize=11)
+    return _finish(fig, path)
+
+
+def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
+    """Prior (line, exact density) against posterior (filled histogram), one panel per parameter.
+
+    Positive parameters on log axes, densities per unit of the axis coordinate, each curve
+    scaled to its peak; the title gives the contraction 1 - var(post)/var(prior) of
+    :meth:`Fit.summary`: near 1 the data determined the parameter, near 0 the prior did.
+    """
+    fit = _as_fit(fit)
+    slots = _slots(fit)
+    if var_names is not None:
+        slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
+    summary = fit.summary()
+    ds = _group(fit, "posterior")
+    ncols = min(ncols, len(slots))
+    nrows = math.ceil(len(slots) / ncols)
+    fig = _new_figure(3.0 * ncols, 2.3 * nrows + 0.7)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for ax in axes.ravel()[len(slots):]:
+        ax.set_visible(False)
+    for k, s in enumerate(slots):
+        ax = axes.ravel()[k]
+        v = _values(ds, s).ravel()
+        prior = s["prior"]
+        lo_q, hi_q = (prior.ppf(np.array([0.005, 0.995])) if prior is not None else np.quantile(v, [0, 1]))
+        lo_q = max(lo_q, np.min(v) * 1e-3) if s["log"] else lo_q
+        log = _use_log(s, [lo_q, hi_q, v.min(), v.max()])
+        t = np.log10(v) if log else v
+        if log:
+            lo_q, hi_q = np.log10(lo_q), np.log10(hi_q)
+        lo, hi = min(lo_q, t.min()), max(hi_q, t.max())
+        h, edges = np.histogram(t, bins=50, density=True)
+        ax.stairs(h / h.max(), 10 ** edges if log else edges, fill=True, color=_COLOURS[0], alpha=0.55,
+                  label="posterior")
+        if prior is not None:
+            grid = np.linspace(lo, hi, 400)
+            xs = 10 ** grid if log else grid
+            with np.errstate(divide="ignore", over="ignore"):
+                dens = np.exp(prior.logpdf(xs)) * (xs * math.log(10) if log else 1.0)
+            if np.nanmax(dens) > 0:
+                ax.plot(xs, dens / np.nanmax(dens), color="black", lw=1.2, label="prior")
+        if log:
+            ax.set_xscale("log")
+        ax.set_xlim(10 ** lo if log else lo, 10 ** hi if log else hi)
+        if log:
+            _log_ticks(ax)
+        ax.set_ylim(0, 1.08)
+        ax.set_yticks([])
+        ax.set_xlabel(_slot_label(s), fontsize=9)
+        ax.tick_params(labelsize=7)
+        c = summary.loc[s["name"], "contraction"] if s["name"] in summary.index else np.nan
+        ax.set_title(f"{s['name']}: contraction {c:.2f}", fontsize=9)
+    for row in axes:
+        row[0].set_ylabel("density (scaled to peak)", fontsize=8)
+    fig.legend(handles=[Patch(color=_COLOURS[0], alpha=0.55, label="posterior"),
+                        Line2D([], [], color="black", lw=1.2, label="prior")],
+               loc="outside right upper", fontsize=9, frameon=False)
+    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: prior vs posterior", fontsize=11)
+    return _finish(fig, path)
+
+
+# ---- across fits ---------------------------------------------------------------------------
+def _forest_rows(items, parameter):
+    """(label, mean, lo, hi) rows and the parameter's unit from fits and/or summary tables."""
+    from .fit import Fit
+
+    if isinstance(items, dict):
+        pairs = list(items.items())
+    else:
+        items = list(items) if isinstance(items, (list, tuple)) else [items]
+        fits = [i if isinstance(i, pd.DataFrame) else _as_fit(i) for i in items]
+        datasets = {f.dataset_id for f in fits if isinstance(f, Fit)}
+        models = {f.model_id for f in fits if isinstance(f, Fit)}
+        pairs = []
+        for k, f in enumerate(fits):
+            if len(fits) == 1:
+                label = ""
+            elif not isinstance(f, Fit):
+                label = str(k)
+            elif len(datasets) > 1 and len(models) > 1:
+                label = f"{f.model_id} / {f.dataset_id}"
+            else:
+                label = f.dataset_id if len(datasets) > 1 else f.model_id
+            pairs.append((label, f))
+    rows, unit = [], None
+    pattern = re.compile(rf"^{re.escape(parameter)}(\[(.*)\])?$")
+    for label, item in pairs:
+        if not isinstance(item, pd.DataFrame):
+            item = _as_fit(item)
+            unit = unit or parameter_units(item).get(parameter)
+            table = item.summary()
+            dims = [d for d in item.idata["posterior"][parameter].dims if d not in ("chain", "draw")] \
+                if parameter in item.idata["posterior"].data_vars else []
+        else:
+            table, dims = item, []
+        for name in table.index:
+            m = pattern.match(str(name))
+            if not m:
+                continue
+            level = m.group(2)
+            level_text = f"{dims[0]} = {level}" if level is not None and dims else level
+            text = " · ".join(t for t in (str(label), level_text) if t) or parameter
+            rows.append((text, float(table.loc[name, "mean"]), float(table.loc[name, "hdi_3%"]),
+                         float(table.loc[name, "hdi_97%"])))
+    return rows, unit
+
+
+def _population_interval(spec):
+    """(centre, lo, hi) of a population distribution given as a mapping, draws or a scipy dist."""
+    if hasattr(spec, "ppf"):
+        lo, mid, hi = spec.ppf([0.03, 0.5, 0.97])
+        return float(mid), float(lo), float(hi)
+    if isinstance(spec, dict):
+        if "mean" in spec and "sd" in spec and not {"lo", "hi"} & set(spec):
+            m, sd = float(spec["mean"]), float(spec["sd"])
+            return m, m - 1.881 * sd, m + 1.881 * sd  # central 94% of a normal
+        centre = float(spec.get("median", spec.get("mean")))
+        return centre, float(spec.get("lo", spec.get("hdi_3%"))), float(spec.get("hi", spec.get("hdi_97%")))
+    draws = np.asarray(spec, dtype=float).ravel()
+    lo, mid, hi = np.quantile(draws, [0.03, 0.5, 0.97])
+    return float(mid), float(lo), float(hi)
+
+
+def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=None):
+    """Posterior mean and 94% HDI of ``parameter`` across fits (subjects, conditions) and levels.
+
+    Parameters
+    ----------
+    fits_or_tables : Fit, summary DataFrame, or a list / dict (label -> item) of them
+        A parameter split by a column gives one row per level.
+    parameter : str
+    population : optional
+        The population distribution of the parameter, drawn as a band over all rows and a
+        row of its own: a mapping (``mean``/``sd``, or ``median``/``lo``/``hi``), an array of
+        population draws, or a frozen scipy.stats distribution (94% central interval).
+    unit : str, optional
+        Unit for the axis label when only tables are given (fits carry their own).
+    """
+    rows, card_unit = _forest_rows(fits_or_tables, parameter)
+    if not rows:
+        raise InputError("plot_forest", f"no parameter {parameter!r} in the given fits or tables")
+    unit = unit or card_unit
+    labels = [r[0] for r in rows]
+    mean = np.array([r[1] for r in rows])
+    lo = np.array([r[2] for r in rows])
+    hi = np.array([r[3] for r in rows])
+    n = len(rows) + (1 if population is not None else 0)
+    fig = _new_figure(6.4, 0.32 * n + 1.4)
+    ax = fig.subplots()
+    y = np.arange(len(rows))[::-1]
+    ax.hlines(y, lo, hi, color=_COLOURS[0], lw=1.6)
+    ax.plot(mean, y, "o", color=_COLOURS[0], ms=4, label="mean and 94% HDI")
+    ticks, ticklabels = list(y), labels
+    values = np.concatenate([lo, hi])
+    if population is not None:
+        c, plo, phi = _population_interval(population)
+        ax.axvspan(plo, phi, color="0.6", alpha=0.2, lw=0)
+        ax.axvline(c, color="0.3", lw=0.8, ls="--")
+        ax.hlines(len(rows), plo, phi, color="black", lw=2.2)
+        ax.plot(c, len(rows), "D", color="black", ms=5, label="population (94%)")
+        ticks, ticklabels = ticks + [len(rows)], labels + ["population"]
+        values = np.concatenate([values, [plo, phi]])
+    ax.set_yticks(ticks, ticklabels, fontsize=8)
+    ax.set_ylim(-0.7, n - 0.3)
+    if np.all(values > 0) and values.max() / values.min() > 20:
+        ax.set_xscale("log")
+        _log_ticks(ax)
+    ax.set_xlabel(_param_label(parameter, unit))
+    ax.grid(axis="x", alpha=0.3, lw=0.5)
+    ax.legend(fontsize=8, frameon=False, loc="best")
+    ax.set_title(f"{parameter} across fits and conditions", fontsize=10)
+    return _finish(fig, path)
+
+
+_EVIDENCE = ("log_Z", "logZ", "log_z", "log_evidence", "lnZ", "ln_Z")
+_EVIDENCE_ERR = ("log_Z_err", "log_Z_se", "logZ_err", "log_Z_error", "se_log_Z", "log_Z_sd", "log_evidence_err",
+                 "lnZ_err")
+_LOO = ("elpd_loo", "elpd")
+_LOO_ERR = ("elpd_loo_se", "elpd_se", "se")
+
+
+def _pick(table, names):
+    lower = {str(c).lower(): c for c in table.columns}
+    return next((lower[n.lower()] for n in names if n.lower() in lower), None)
+
+
+def plot_comparison(table, path=None, *, title=None):
+    """Model comparison chart: log-evidence and/or LOO ELPD of each model relative to the best.
+
+    ``table`` is any DataFrame with one row per model (index or a ``model`` column) and
+    columns such as ``log_Z`` (+ ``log_Z_err``) and ``elpd_loo`` (+ ``se``); without them,
+    its first numeric column is drawn as is.
+    """
+    table = table.copy()
+    if "model" in table.columns:
+        table = table.set_index("model")
+    metrics = []
+    for names, errs, text in ((_EVIDENCE, _EVIDENCE_ERR, "log evidence, log Z − best"),
+                              (_LOO, _LOO_ERR, "ELPD (LOO) − best")):
+        col = _pick(table, names)
+        if col is not None:
+            metrics.append((col, _pick(table, errs), f"{text} [nats]", True))
+    if not metrics:
+        numeric = [c for c in table.columns if pd.api.types.is_numeric_dtype(table[c])]
+        if not numeric:
+            raise InputError("plot_comparison", "the comparison table has no numeric column to draw")
+        metrics.append((numeric[0], None, str(numeric[0]), False))
+    fig = _new_figure(4.2 * len(metrics) + 1.5, 0.38 * len(table) + 1.6)
+    axes = fig.subplots(1, len(metrics), squeeze=False, sharey=True)[0]
+    y = np.arange(len(table))[::-1]
+    for ax, (col, err, label, relative) in zip(axes, metrics):
+        v = table[col].to_numpy(dtype=float)
+        shown = v - np.nanmax(v) if relative else v
+        e = table[err].to_numpy(dtype=float) if err is not None else None
+        ax.errorbar(shown, y, xerr=e, fmt="o", color=_COLOURS[0], ecolor=_COLOURS[0], capsize=3, ms=5)
+        if relative:
+            ax.axvline(0, color="black", lw=0.7)
+        ax.set_xlabel(label)
+        ax.grid(axis="x", alpha=0.3, lw=0.5)
+    axes[0].set_yticks(y, [str(i) for i in table.index], fontsize=9)
+    fig.suptitle(title or "model comparison (higher is better; bars: ± 1 standard error)", fontsize=10)
+    return _finish(fig, path)

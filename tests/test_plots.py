@@ -1,0 +1,368 @@
+"""Figures from saved fits: every plot on every shipped model, labels in the data's units, and
+posterior-predictive bands that hold their stated share of data simulated from the model."""
+
+import math
+import os
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import skinfit
+from skinfit import plots
+
+ROOT = Path(skinfit.__file__).resolve().parents[1]
+PNG = b"\x89PNG\r\n\x1a\n"
+#: as in conftest.py: a fixed seed, overridable to probe for flakes
+SEED = int(os.environ.get("SKINFIT_TEST_SEED", "12345"))
+
+
+def _short_fit(model, dataset, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        return skinfit.fit(model, dataset, max_steps=600, ess_target=50, n_global=300, **kw)
+
+
+def _shipped():
+    """(model, dataset) for every shipped dataset whose card names a shipped model."""
+    out = []
+    for did in skinfit.list_datasets():
+        card = tomllib.loads((ROOT / "datasets" / did / "dataset.toml").read_text())
+        if card.get("model") in skinfit.list_models():
+            out.append((card["model"], did))
+    return out
+
+
+SHIPPED = _shipped()
+# one competitor too: it ignores voltage, yet its plots still panel the data by voltage
+CASES = SHIPPED + [("electroadhesion_empirical", "electroadhesion_synthetic")]
+
+
+@pytest.fixture(scope="module")
+def fits(ea_fit):
+    cache = {("electroadhesion", "electroadhesion_synthetic"): ea_fit}
+
+    def get(model, dataset):
+        if (model, dataset) not in cache:
+            cache[model, dataset] = _short_fit(model, dataset, rng=5)
+        return cache[model, dataset]
+
+    return get
+
+
+def _data_units(dataset):
+    card = tomllib.loads((ROOT / "datasets" / dataset / "dataset.toml").read_text())
+    return {spec.get("name", header): spec.get("unit") for header, spec in card["columns"].items()}
+
+
+def _unit(u):
+    return "-" if u in ("1", "-") else u
+
+
+def _written(path):
+    data = Path(path).read_bytes()
+    assert data[:8] == PNG and len(data) > 5000, f"{path} is not a non-empty PNG"
+
+
+def _labels(fig):
+    return ({a.get_xlabel() for a in fig.axes if a.get_visible()},
+            {a.get_ylabel() for a in fig.axes if a.get_visible()})
+
+
+@pytest.mark.parametrize("model,dataset", CASES, ids=[f"{m}-{d}" for m, d in CASES])
+def test_ppc_plot_in_the_units_the_data_came_in(model, dataset, fits, tmp_path):
+    fit = fits(model, dataset)
+    fig = plots.plot_ppc(fit, tmp_path / "ppc.png")
+    _written(tmp_path / "ppc.png")
+    units = _data_units(dataset)
+    spec = plots.plot_spec(fit)
+    xlabels, ylabels = _labels(fig)
+    x = spec["x"]
+    assert f"{x.replace('_', ' ')} [{_unit(units[x])}]" in xlabels
+    for o in spec["observables"]:
+        assert f"{o.replace('_', ' ')} [{_unit(units[o])}]" in ylabels | xlabels
+    if model.startswith("electroadhesion"):  # the shipped CSV is in mN: so are the axes
+        assert "normal force [mN]" in xlabels and "tangential force [mN]" in ylabels
+        titles = [a.get_title() for a in fig.axes if a.get_title()]
+        assert titles == [f"voltage = {v} V" for v in range(0, 201, 25)]
+        # the plotted data are the observed values in mN
+        od = fit.idata["observed_data"]["tangential_force"].values * 1e3
+        plotted = np.concatenate([c.get_offsets()[:, 1] for a in fig.axes for c in a.collections
+                                  if c.get_gid() == "data"])
+        np.testing.assert_allclose(np.sort(plotted), np.sort(od))
+
+
+@pytest.mark.parametrize("model,dataset", SHIPPED, ids=[f"{m}-{d}" for m, d in SHIPPED])
+def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_path):
+    fit = fits(model, dataset)
+    units = plots.parameter_units(fit)
+    names = [s["name"] for s in fit.attr("slots")]
+    expected = {n: f"{n} [{_unit(units[n.split('[')[0]])}]" for n in names}
+    for name, func in [("pair", plots.plot_pair), ("trace", plots.plot_trace),
+                       ("prior_posterior", plots.plot_prior_posterior)]:
+        fig = func(fit, tmp_path / f"{name}.png")
+        _written(tmp_path / f"{name}.png")
+        xlabels, ylabels = _labels(fig)
+        shown = xlabels | ylabels
+        wanted = list(expected.values())[:10] if name == "pair" else expected.values()
+        missing = [w for w in wanted if w not in shown]
+        assert not missing, f"{name}: no axis labelled {missing}"
+    if model == "electroadhesion":
+        assert "E_star [Pa]" in expected.values() and "alpha [-]" in expected.values()
+    fig = plots.plot_rank(fit, tmp_path / "rank.png")
+    _written(tmp_path / "rank.png")
+    assert any("rank" in x.lower() for x in _labels(fig)[0])
+
+
+def test_plots_leave_no_pyplot_figures(ea_fit):
+    import matplotlib.pyplot as plt
+
+    before = set(plt.get_fignums())
+    plots.plot_ppc(ea_fit)
+    plots.plot_rank(ea_fit)
+    assert set(plt.get_fignums()) == before
+
+
+# ---- posterior-predictive bands are calibrated ------------------------------------------------
+TRUTH = {"mu": 0.45, "E_star": 30e3, "d_air": 0.5e-6}
+SIGMA = 0.02  # N
+
+
+@pytest.fixture(scope="module")
+def simulated_fit(tmp_path_factory):
+    """electroadhesion_coulomb fitted (mu split by voltage) to 300 points simulated from itself,
+    stored in mN as a lab would."""
+    rng = np.random.default_rng(SEED)
+    model = skinfit.load_model("electroadhesion_coulomb")
+    v, fn = np.meshgrid(np.arange(0, 201, 50.0), np.repeat(np.linspace(0.2, 2.0, 30), 2), indexing="ij")
+    frame = pd.DataFrame({"voltage": v.ravel(), "normal_force": fn.ravel()})
+    clean = model.predict(TRUTH, frame)
+    frame["tangential_force"] = clean + SIGMA * rng.standard_normal(len(frame))
+    d = tmp_path_factory.mktemp("simulated")
+    out = frame.assign(normal_force=frame["normal_force"] * 1e3, tangential_force=frame["tangential_force"] * 1e3)
+    out.to_csv(d / "data.csv", index=False, float_format="%.12g")
+    (d / "dataset.toml").write_text(
+        'schema_version = 1\nid = "coulomb_simulated"\nfile = "data.csv"\n'
+        f'[provenance]\nkind = "simulated"\nseed = {SEED}\n'
+        'generating_parameters = { mu = 0.45, E_star = 30e3, d_air = 0.5e-6 }\n'
+        '[columns.voltage]\nunit = "V"\n[columns.normal_force]\nunit = "mN"\n[columns.tangential_force]\nunit = "mN"\n')
+    fit = _short_fit("electroadhesion_coulomb", skinfit.load_dataset(str(d)), rng=SEED + 1, split={"mu": "voltage"})
+    return fit, frame, clean
+
+
+def test_ppc_bands_hold_their_share_of_simulated_data(simulated_fit):
+    fit, frame, clean = simulated_fit
+    bands = plots.ppc_bands(fit)
+    n = len(bands)
+    assert n == 300
+    q = bands[["q05", "q25", "q50", "q75", "q95"]].to_numpy()
+    assert np.all(np.diff(q, axis=1) >= 0)
+    # one row per observation, in the data's units (mN), centred on the generating curve
+    np.testing.assert_allclose(bands["x"], frame["normal_force"] * 1e3)
+    np.testing.assert_allclose(bands["observed"], frame["tangential_force"] * 1e3, rtol=1e-10)
+    assert np.median(np.abs(bands["q50"] - clean * 1e3)) < SIGMA * 1e3
+    obs = bands["observed"].to_numpy()
+    for lo, hi, p in [("q05", "q95", 0.90), ("q25", "q75", 0.50)]:
+        inside = np.mean((obs >= bands[lo]) & (obs <= bands[hi]))
+        tol = 3 * math.sqrt(p * (1 - p) / n)  # binomial: 3 standard deviations
+        assert abs(inside - p) < tol, f"{p:.0%} band holds {inside:.3f} of the points (tolerance {tol:.3f})"
+    # negative control: residuals 2.5x too large fall outside far more often than 10%
+    wide = bands["q50"] + 2.5 * (obs - bands["q50"])
+    assert np.mean((wide >= bands["q05"]) & (wide <= bands["q95"])) < 0.9 - 3 * math.sqrt(0.09 / n)
+
+
+def test_ppc_plot_draws_the_bands_it_reports(simulated_fit, tmp_path):
+    fit, _, _ = simulated_fit
+    fig = plots.plot_ppc(fit, tmp_path / "ppc.png")
+    _written(tmp_path / "ppc.png")
+    bands = plots.ppc_bands(fit)
+    panels = [a for a in fig.axes if a.get_title().startswith("voltage")]
+    assert [a.get_title() for a in panels] == [f"voltage = {v} V" for v in range(0, 201, 50)]
+    for p, ax in enumerate(panels):
+        rows = bands[bands["panel"] == p].groupby("x")[["q05", "q25", "q75", "q95"]].mean()
+        for gid, lo, hi in [("band90", "q05", "q95"), ("band50", "q25", "q75")]:
+            (band,) = [c for c in ax.collections if c.get_gid() == gid]
+            y = band.get_paths()[0].vertices[:, 1]
+            assert y.min() == pytest.approx(rows[lo].min(), rel=1e-9)
+            assert y.max() == pytest.approx(rows[hi].max(), rel=1e-9)
+    # the median curve of a split fit: each panel with its own level of mu, on a fine grid,
+    # close to the generating curve (in mN)
+    model = skinfit.load_model("electroadhesion_coulomb")
+    for v, ax in zip(range(0, 201, 50), panels):
+        (curve,) = [line for line in ax.lines if line.get_gid() == "median"]
+        x = np.asarray(curve.get_xdata())
+        assert len(x) > 60
+        truth = model.predict(TRUTH, {"normal_force": x * 1e-3, "voltage": np.full(len(x), float(v))}) * 1e3
+        assert np.max(np.abs(np.asarray(curve.get_ydata()) - truth)) < SIGMA * 1e3
+
+
+def test_forest_over_levels_fits_and_population(simulated_fit, ea_fit, tmp_path):
+    fit = simulated_fit[0]
+    fig = plots.plot_forest(fit, "mu", tmp_path / "forest.png", population={"mean": 0.45, "sd": 0.02})
+    _written(tmp_path / "forest.png")
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "mu [-]"
+    ticks = [t.get_text() for t in ax.get_yticklabels()]
+    assert ticks == [f"voltage = {v}" for v in range(0, 201, 50)] + ["population"]
+    table = fit.summary()
+    np.testing.assert_allclose(sorted(ax.lines[0].get_xdata()), sorted(table.loc[[f"mu[{v}]" for v in
+                                                                                   range(0, 201, 50)], "mean"]))
+    # summary tables from several subjects, labelled by the caller
+    a = ea_fit.summary()
+    b = a.copy()
+    b[["mean", "hdi_3%", "hdi_97%"]] *= 1.1
+    fig = plots.plot_forest({"S01": a, "S02": b}, "alpha", unit="1", population=np.linspace(0.4, 0.5, 101))
+    assert [t.get_text() for t in fig.axes[0].get_yticklabels()] == ["S01", "S02", "population"]
+    assert fig.axes[0].get_xlabel() == "alpha [-]"
+    with pytest.raises(skinfit.InputError, match="no parameter 'nope'"):
+        plots.plot_forest(a, "nope")
+
+
+def test_comparison_chart_relative_to_best(tmp_path):
+    table = pd.DataFrame({"log_Z": [-10.0, -12.5, -30.0], "log_Z_err": [0.1, 0.2, 0.1],
+                          "elpd_loo": [5.0, 3.0, -9.0], "se": [1.0, 1.5, 2.0]},
+                         index=["electroadhesion", "electroadhesion_coulomb", "electroadhesion_empirical"])
+    fig = plots.plot_comparison(table, tmp_path / "cmp.png")
+    _written(tmp_path / "cmp.png")
+    xlabels = [a.get_xlabel() for a in fig.axes]
+    assert xlabels == ["log evidence, log Z − best [nats]", "ELPD (LOO) − best [nats]"]
+    np.testing.assert_allclose(fig.axes[0].lines[0].get_xdata(), [0.0, -2.5, -20.0])
+    assert [t.get_text() for t in fig.axes[0].get_yticklabels()] == list(table.index)
+
+
+def test_card_plot_table_sets_panels_and_colours(ea_fit):
+    tree = ea_fit.idata.copy(deep=False)
+    tree.attrs = dict(tree.attrs)
+    tree.attrs["model_card"] += '\n[plot]\nx = "normal_force"\npanels = []\ncolours = ["voltage"]\n'
+    assert "[plot]" not in ea_fit.idata.attrs["model_card"]
+    fig = plots.plot_ppc(skinfit.Fit(tree))
+    visible = [a for a in fig.axes if a.get_visible()]
+    assert len(visible) == 1
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "voltage = 0 V" in legend and "voltage = 200 V" in legend
+
+
+# ---- layouts of the other models, on stand-in physics (two observables; a reference curve) ------
+def _contact_pair(p, x, c):
+    """Stand-in for contact_area: power laws in the normal force, falling with actuation."""
+    f, fa = x["normal_force"], x["actuation_force"]
+    area = p["alpha_a"] * f ** (p["m"] - 0.5 * fa)
+    return {"contact_area": area, "impedance": p["beta_z"] * f ** p["n_z"] + 0 * area}, np.True_
+
+
+def _wavy_offset(p, x, c):
+    """Stand-in for wavy_surface: the ball-bearing ratio g(x) plus a signed friction term."""
+    k = 2 * np.pi / x["wavelength"]
+    g = -x["amplitude"] * k * np.sin(k * x["position"])
+    return {"force_ratio": g + x["direction"] * p["mu"] + 0 * p["mu"] * g}, np.True_
+
+
+@pytest.fixture(scope="module")
+def standin(tmp_path_factory):
+    """Cards, priors and datasets of two stand-in models in a temporary folder."""
+    import sys
+    import types
+
+    module = types.ModuleType("skinfit.physics._plot_standin")
+    module.__all__ = ["contact_pair", "wavy_offset"]
+    module.contact_pair, module.wavy_offset = _contact_pair, _wavy_offset
+    sys.modules[module.__name__] = module
+    d = tmp_path_factory.mktemp("standin")
+    rng = np.random.default_rng(SEED)
+    # contact area: area in mm^2 and impedance in N*s/m against force, three actuation levels
+    f, fa = np.meshgrid(np.geomspace(0.1, 2.0, 12), [0.0, 0.2, 0.4])
+    truth = {"alpha_a": 40e-6, "m": 0.6, "beta_z": 3.0, "n_z": 0.9}
+    y, _ = _contact_pair(truth, {"normal_force": f.ravel(), "actuation_force": fa.ravel()}, {})
+    frame = pd.DataFrame({"normal_force": f.ravel(), "actuation_force": fa.ravel() * 1e3,
+                          "contact_area": y["contact_area"] * np.exp(0.05 * rng.standard_normal(f.size)) * 1e6,
+                          "impedance": y["impedance"] * np.exp(0.05 * rng.standard_normal(f.size))})
+    (d / "ca").mkdir()
+    frame.to_csv(d / "ca" / "data.csv", index=False)
+    (d / "ca" / "dataset.toml").write_text(
+        'schema_version = 1\nid = "ca_standin"\nfile = "data.csv"\n[provenance]\nkind = "simulated"\nseed = 1\n'
+        'generating_parameters = {}\n[columns.normal_force]\nunit = "N"\n[columns.actuation_force]\nunit = "mN"\n'
+        '[columns.contact_area]\nunit = "mm^2"\n[columns.impedance]\nunit = "N*s/m"\n')
+    (d / "ca.toml").write_text(
+        'schema_version = 1\nid = "ca_standin"\ntitle = "stand-in"\nsource = "test"\n'
+        'forward = "skinfit.physics._plot_standin:contact_pair"\n'
+        '[[observables]]\nname = "contact_area"\nunit = "m^2"\nnoise = "lognormal"\n'
+        '[[observables]]\nname = "impedance"\nunit = "N*s/m"\nnoise = "lognormal"\n'
+        '[[covariates]]\nname = "normal_force"\nunit = "N"\n[[covariates]]\nname = "actuation_force"\nunit = "N"\n'
+        '[[parameters]]\nname = "alpha_a"\nunit = "m^2/N^m"\n[[parameters]]\nname = "m"\nunit = "1"\n'
+        '[[parameters]]\nname = "beta_z"\nunit = "N*s/m"\n[[parameters]]\nname = "n_z"\nunit = "1"\n'
+        '[plot]\nx = "normal_force"\npanels = ["actuation_force"]\nxscale = "log"\nyscale = "log"\n')
+    prior = 'dist = "lognormal"\nmedian = {}\nsigma = 1.0\nbounds = [{}, {}]\nsource = "test"\n'
+    (d / "ca_priors.toml").write_text(
+        'schema_version = 1\nmodel = "ca_standin"\n'
+        + "".join(f"[{n}]\n" + prior.format(m, lo, hi) for n, m, lo, hi in
+                  [("alpha_a", 40e-6, 1e-7, 1e-3), ("m", 0.6, 0.05, 3.0), ("beta_z", 3.0, 0.01, 100.0),
+                   ("n_z", 0.9, 0.05, 3.0), ("sigma_contact_area", 0.05, 1e-4, 1.0),
+                   ("sigma_impedance", 0.05, 1e-4, 1.0)]))
+    # wavy: force ratio against position (mm) per sliding direction
+    x = np.linspace(0, 60, 40)
+    pos, direction = np.meshgrid(x, [-1.0, 1.0])
+    cov = {"position": pos.ravel() * 1e-3, "amplitude": np.full(pos.size, 2e-3),
+           "wavelength": np.full(pos.size, 30e-3), "direction": direction.ravel()}
+    y, _ = _wavy_offset({"mu": 0.4}, cov, {})
+    frame = pd.DataFrame({"position": pos.ravel(), "amplitude": 2.0, "wavelength": 30.0,
+                          "direction": direction.ravel(),
+                          "force_ratio": y["force_ratio"] + 0.03 * rng.standard_normal(pos.size)})
+    (d / "wavy").mkdir()
+    frame.to_csv(d / "wavy" / "data.csv", index=False)
+    (d / "wavy" / "dataset.toml").write_text(
+        'schema_version = 1\nid = "wavy_standin"\nfile = "data.csv"\n[provenance]\nkind = "simulated"\nseed = 1\n'
+        'generating_parameters = {}\n[columns.position]\nunit = "mm"\nsigned = true\n[columns.amplitude]\n'
+        'unit = "mm"\n[columns.wavelength]\nunit = "mm"\n[columns.direction]\nunit = "1"\nsigned = true\n'
+        '[columns.force_ratio]\nunit = "1"\nsigned = true\n')
+    (d / "wavy.toml").write_text(
+        'schema_version = 1\nid = "wavy_standin"\ntitle = "stand-in"\nsource = "test"\n'
+        'forward = "skinfit.physics._plot_standin:wavy_offset"\n'
+        '[[observables]]\nname = "force_ratio"\nunit = "1"\n'
+        + "".join(f'[[covariates]]\nname = "{c}"\nunit = "{u}"\n' for c, u in
+                  [("position", "m"), ("amplitude", "m"), ("wavelength", "m"), ("direction", "1")])
+        + '[[parameters]]\nname = "mu"\nunit = "1"\n')
+    (d / "wavy_priors.toml").write_text(
+        'schema_version = 1\nmodel = "wavy_standin"\n[mu]\n' + prior.format(0.5, 0.01, 2.0)
+        + '[sigma]\n' + prior.format(0.05, 1e-4, 1.0))
+    fits = {name: _short_fit(skinfit.load_model(str(d / f"{name}.toml")), skinfit.load_dataset(str(d / sub)),
+                             priors=skinfit.load_priors(str(d / f"{name}_priors.toml")), rng=SEED)
+            for name, sub in [("ca", "ca"), ("wavy", "wavy")]}
+    yield fits
+    del sys.modules[module.__name__]
+
+
+def test_two_observables_one_row_each_and_one_against_the_other(standin, tmp_path):
+    fit = standin["ca"]
+    fig = plots.plot_ppc(fit, tmp_path / "ca.png")
+    _written(tmp_path / "ca.png")
+    axes = [a for a in fig.axes if a.get_visible()]
+    assert len(axes) == 9  # (area, impedance, area vs impedance) x 3 actuation forces
+    assert [a.get_title() for a in axes[:3]] == [f"actuation force = {v} mN" for v in (0, 200, 400)]
+    assert {a.get_ylabel() for a in axes[:3]} == {"contact area [mm^2]"}
+    assert {a.get_ylabel() for a in axes[3:6]} == {"impedance [N*s/m]"}
+    assert {a.get_xlabel() for a in axes[:6]} == {"normal force [N]"}
+    assert {(a.get_xlabel(), a.get_ylabel()) for a in axes[6:]} == {("impedance [N*s/m]", "contact area [mm^2]")}
+    assert all(a.get_xscale() == "log" and a.get_yscale() == "log" for a in axes)
+    bands = plots.ppc_bands(fit)
+    area = bands[bands["observable"] == "contact_area"]
+    assert area["observed"].between(1, 200).all()  # mm^2, as the data came in
+    for ax in axes[:6]:
+        (curve,) = [line for line in ax.lines if line.get_gid() == "median"]
+        assert np.all(np.isfinite(curve.get_ydata()))
+
+
+def test_reference_curve_of_the_wavy_surface(standin, tmp_path):
+    fit = standin["wavy"]
+    fig = plots.plot_ppc(fit, tmp_path / "wavy.png")
+    _written(tmp_path / "wavy.png")
+    axes = [a for a in fig.axes if a.get_visible()]
+    assert [a.get_title() for a in axes] == ["direction = -1", "direction = 1"]
+    assert axes[0].get_xlabel() == "position [mm]" and axes[0].get_ylabel() == "force ratio [-]"
+    for ax in axes:
+        (ref,) = [line for line in ax.lines if line.get_gid() == "reference"]
+        x = np.asarray(ref.get_xdata())
+        np.testing.assert_allclose(ref.get_ydata(), -2.0 * (2 * np.pi / 30) * np.sin(2 * np.pi * x / 30), atol=1e-12)
+    assert "ball bearing, g(x) (eq. 2)" in [t.get_text() for t in fig.legends[0].get_texts()]

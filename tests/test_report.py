@@ -1,0 +1,215 @@
+"""The static report: parses, is self-contained (no network), shows failures first, and every
+table in it holds the saved fits' numbers."""
+
+import math
+import re
+import warnings
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import skinfit
+from skinfit import report
+from skinfit.cli import main
+
+
+class _Page(HTMLParser):
+    """Collects every src/href, tables by their data-table/data-id, and the order of things."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.links, self.tags, self.tables, self.order = [], [], {}, []
+        self._table = self._row = self._cell = None
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        self.tags.append(tag)
+        for key in ("src", "href"):
+            if key in attrs:
+                self.links.append(attrs[key])
+        if tag == "table":
+            self._table = {"rows": []}
+            self.tables[(attrs.get("data-table"), attrs.get("data-id"))] = self._table
+            self.order.append(("table", attrs.get("data-table"), attrs.get("data-id")))
+        elif tag == "tr" and self._table is not None:
+            self._row = []
+        elif tag in ("td", "th") and self._row is not None:
+            self._cell = ""
+        elif tag == "section":
+            self.order.append(("section", attrs.get("id"), None))
+        elif tag == "li":
+            self.order.append(("li", None, None))
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None:
+            self._row.append(self._cell.strip())
+            self._cell = None
+        elif tag == "tr" and self._row is not None:
+            self._table["rows"].append(self._row)
+            self._row = None
+        elif tag == "table":
+            self._table = None
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell += data
+        if self.order and self.order[-1][0] == "li":
+            self.order[-1] = ("li", (self.order[-1][1] or "") + data, None)
+
+
+def _parse(path):
+    page = _Page()
+    page.feed(Path(path).read_text(encoding="utf-8"))
+    page.close()
+    return page
+
+
+def _frame(table):
+    header, *rows = table["rows"]
+    return pd.DataFrame(rows, columns=header).set_index(header[0])
+
+
+def _number(text):
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+@pytest.fixture(scope="module")
+def rival():
+    """A competitor fitted briefly to the same data: it does not converge, and says so."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        return skinfit.fit("electroadhesion_coulomb", "electroadhesion_synthetic", rng=4, max_steps=300,
+                           ess_target=50, n_global=300)
+
+
+@pytest.fixture(scope="module")
+def written(ea_fit, rival, tmp_path_factory):
+    out = tmp_path_factory.mktemp("report") / "ea"
+    comparison = pd.DataFrame({"log_z": [512.25, 498.125], "log_z_se": [0.03125, 0.0625],
+                               "elpd_loo": [540.5, 522.75], "elpd_loo_se": [10.5, 11.25],
+                               "strength": ["best", "decisive for electroadhesion"]},
+                              index=pd.Index(["electroadhesion", "electroadhesion_coulomb"], name="model"))
+    index = report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=comparison)
+    return index, comparison
+
+
+def test_report_files_and_self_contained(written):
+    index, _ = written
+    out = index.parent
+    assert index.name == "index.html"
+    for name in ["summary.md", "comparison.csv", "electroadhesion__electroadhesion_synthetic_summary.csv",
+                 "electroadhesion__electroadhesion_synthetic_diagnostics.csv",
+                 "electroadhesion_coulomb__electroadhesion_synthetic_summary.csv"]:
+        assert (out / name).stat().st_size > 0, name
+    html = index.read_text(encoding="utf-8")
+    page = _parse(index)
+    assert page.tags[0] == "html" and "body" in page.tags
+    assert page.links, "the report links its figures and tables"
+    for link in page.links:
+        assert not re.match(r"^([a-z][a-z0-9+.-]*:|//)", link, re.I), f"not a relative reference: {link}"
+        if not link.startswith("#"):
+            assert (out / link).is_file(), f"{link} does not exist beside index.html"
+    images = [link for link in page.links if link.endswith(".png")]
+    assert len(images) >= 9  # 4 per fit and the comparison chart
+    for img in images:
+        assert (out / img).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not re.search(r"https?://|ftp://|url\(", html)
+    assert "script" not in page.tags and "link" not in page.tags and "iframe" not in page.tags
+    anchors = set(re.findall(r'id="([^"]+)"', html))
+    for link in page.links:
+        if link.startswith("#"):
+            assert link[1:] in anchors, link
+
+
+def test_failures_are_at_the_top(written, rival):
+    index, _ = written
+    page = _parse(index)
+    assert not rival.converged
+    first_table = next(i for i, o in enumerate(page.order) if o[0] == "table")
+    failures = [i for i, o in enumerate(page.order) if o[0] == "li" and o[1] and "FAIL" in o[1]
+                and "electroadhesion_coulomb" in o[1] and "not converged" in o[1]]
+    assert failures and failures[0] < first_table
+    assert page.order[0] == ("section", "diagnostics", None)
+    md = (index.parent / "summary.md").read_text()
+    assert md.index("**FAIL** electroadhesion_coulomb") < md.index("### Posterior summary")
+
+
+def test_tables_hold_the_saved_numbers(written, ea_fit, rival):
+    index, comparison = written
+    out = index.parent
+    page = _parse(index)
+    md = (out / "summary.md").read_text()
+    for fit, key in [(ea_fit, "electroadhesion__electroadhesion_synthetic"),
+                     (rival, "electroadhesion_coulomb__electroadhesion_synthetic")]:
+        summary = fit.summary()
+        shown = _frame(page.tables["summary", key])
+        assert list(shown.index) == list(summary.index)
+        for col in summary.columns:
+            for name in summary.index:
+                want, got = summary.loc[name, col], shown.loc[name, col]
+                if isinstance(want, str):
+                    assert got == want
+                elif math.isnan(want):
+                    assert got == "nan"
+                else:
+                    assert float(got) == pytest.approx(want, rel=1e-5, abs=0), (key, name, col)
+                    assert f"| {got} |" in md or f"| {got} " in md
+        units = skinfit.plots.parameter_units(fit)
+        assert list(shown["unit"]) == [units[n.split("[")[0]] for n in summary.index]
+        # the CSV is the summary itself, to the last bit
+        csv = pd.read_csv(out / f"{key}_summary.csv", index_col=0, keep_default_na=False)
+        numeric = [c for c in summary.columns if c != "note"]
+        np.testing.assert_array_equal(csv[numeric].to_numpy(dtype=float), summary[numeric].to_numpy(dtype=float))
+        assert list(csv["note"]) == list(summary["note"])
+        # diagnostics: the sampler's own record
+        diag = _frame(page.tables["diagnostics", key])
+        sampler = fit.attr("sampler")
+        assert diag.loc["converged", "value"] == ("yes" if fit.converged else "no")
+        assert diag.loc["converged", "status"] == ("ok" if fit.converged else "FAIL")
+        assert float(diag.loc["acceptance mean", "value"]) == pytest.approx(sampler["acceptance_mean"], rel=1e-5)
+        assert int(diag.loc["steps", "value"]) == sampler["n_steps"]
+        assert int(diag.loc["evaluations outside the physical support", "value"]) == \
+            fit.attr("support_counts")["outside_support"]
+        assert float(diag.loc["min ESS bulk", "value"]) == pytest.approx(summary["ess_bulk"].min(), rel=1e-5)
+        csv_diag = pd.read_csv(out / f"{key}_diagnostics.csv", index_col=0, keep_default_na=False)
+        assert list(csv_diag.index) == list(diag.index)
+        assert list(csv_diag["status"]) == list(diag["status"])
+    cmp_shown = _frame(page.tables["comparison", "comparison.csv"])
+    assert list(cmp_shown.index) == list(comparison.index)
+    for col in comparison.columns:
+        assert [_number(v) for v in cmp_shown[col]] == list(comparison[col])
+    pd.testing.assert_frame_equal(pd.read_csv(out / "comparison.csv", index_col=0), comparison)
+
+
+def test_each_section_names_what_produced_it(written, ea_fit, rival):
+    index, _ = written
+    html = index.read_text(encoding="utf-8")
+    sections = re.split(r'<section id="', html)
+    for fit in (ea_fit, rival):
+        key = f"{fit.model_id}__{fit.dataset_id}"
+        (section,) = [s for s in sections if s.startswith(key + '"')]
+        attrs = fit.idata.attrs
+        version = fit.attr("versions")["skinfit"]
+        for needle in [attrs["model_id"], attrs["model_sha256"][:12], attrs["priors_id"], attrs["priors_sha256"][:12],
+                       attrs["dataset_id"], attrs["dataset_sha256"][:12], f"skinfit {version}", "simulated"]:
+            assert needle in section, (key, needle)
+
+
+def test_cli_report_from_run_directories(rival, tmp_path, capsys):
+    rival.save(tmp_path / "runs" / "S01" / "fit.nc")
+    rival.save(tmp_path / "runs" / "S02" / "fit.nc")
+    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "rep")]) == 0
+    assert "report written" in capsys.readouterr().out
+    page = _parse(tmp_path / "rep" / "index.html")
+    assert {("summary", "electroadhesion_coulomb__electroadhesion_synthetic"),
+            ("summary", "electroadhesion_coulomb__electroadhesion_synthetic_2")} <= set(page.tables)
+    # two fits of one model: forest plots across them
+    assert any("across_electroadhesion_coulomb_mu" in link for link in page.links)
+    assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep2")]) == 2
+    assert "no such run directory" in capsys.readouterr().err
