@@ -86,9 +86,11 @@ def _cmd_fit(args):
     if args.by:
         from .groups import fit_by
 
-        return fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
-                      split=split, noise=args.noise, progress=not args.quiet, strict=args.strict,
-                      ess_target=args.ess, max_steps=args.max_steps)
+        index = fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
+                       split=split, noise=args.noise, progress=not args.quiet,
+                       ess_target=args.ess, max_steps=args.max_steps)
+        print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
+        return 0 if index["converged"].all() or not args.strict else 3
     t0 = time.perf_counter()
     result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
                  noise=args.noise, progress=not args.quiet, strict=args.strict,
@@ -98,18 +100,6 @@ def _cmd_fit(args):
     print(result.report_text())
     print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
     return 0 if result.converged or not args.strict else 3
-
-
-def _cmd_demo(args):
-    from .fit import fit
-
-    out = Path(args.out)
-    print("skinfit demo: fitting the shipped SIMULATED electroadhesion dataset "
-          "(datasets/electroadhesion_synthetic) with the electroadhesion model\n")
-    result = fit("electroadhesion", "electroadhesion_synthetic", rng=args.seed, progress=True)
-    path = result.save(out / "electroadhesion" / "fit.nc")
-    print(result.report_text())
-    print(f"\nwritten: {path}")
 
 
 def _lazy(module, function):
@@ -177,10 +167,13 @@ def build_parser():
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", default=None, help="directory for the rank table and histogram")
     s.set_defaults(func=_lazy("skinfit.sbc", "cli_sbc"))
-    s = sub.add_parser("demo", help="fit the shipped datasets and print the results")
-    s.add_argument("--out", default="runs/demo", help="where results go (default runs/demo)")
-    s.add_argument("--seed", type=int, default=1)
-    s.set_defaults(func=_cmd_demo)
+    s = sub.add_parser("demo", help="fit every shipped dataset with its model and variants, compare, report")
+    s.add_argument("--out", default="runs/demo", help="where the fits go (default runs/demo)")
+    s.add_argument("--report", help="report directory (default OUT/report)")
+    s.add_argument("--seed", type=int, default=1, help="demo seed; each fit's seed derives from it")
+    s.add_argument("--jobs", type=int, help="parallel fits (default: one per core)")
+    s.add_argument("--dataset", action="append", help="only this shipped dataset (repeatable)")
+    s.set_defaults(func=_lazy("skinfit.demo", "cli_demo"))
     return p
 
 

@@ -1,0 +1,375 @@
+"""Campaigns: a (models x datasets x groups) matrix of fits from one TOML file and one seed.
+
+    skinfit campaign CAMPAIGN.toml [--scheduler tcp://HOST:PORT | local] [--workers N]
+
+The campaign file (``campaigns/example.toml`` is a working example)::
+
+    schema_version = 1
+    seed = 20261122                  # the one campaign seed (integer)
+    out = "runs/example"             # result folder, relative to the campaign file
+    models = ["electroadhesion_coulomb", "electroadhesion_empirical"]   # ids or card paths
+    datasets = ["electroadhesion_synthetic"]                            # ids or folder/card paths
+    by = ["voltage"]                 # optional: fit each level of these columns separately
+    scheduler = "local"              # optional: "local" (Dask LocalCluster) or "tcp://HOST:PORT"
+    workers = 2                      # optional: local worker processes (default: CPU count)
+
+    [fit]                            # optional options of every fit
+    ess = 200                        # minimum effective sample size (default 400)
+    max_steps = 5000                 # emcee step cap (default 20000)
+    noise = "normal"                 # normal | student_t | lognormal (default: the card's)
+    nwalkers = 32                    # emcee walkers (default: max(32, 4 d))
+
+    [priors]                         # optional: prior file per model (default priors/<model>.toml)
+    electroadhesion_coulomb = "priors/electroadhesion_coulomb.toml"
+
+    [split]                          # optional: per model, parameters split by a column in a fit
+    electroadhesion_empirical = { b = "voltage" }
+
+Paths are relative to the campaign file.  Everything is validated before any fit starts;
+mistakes raise :class:`~skinfit.errors.InputError` naming the file and field.
+
+Each fit's seed is :func:`skinfit.groups.derive_seed` of the campaign seed and the key
+(model id, dataset id, group label), so a fit's samples depend neither on the executor, the
+number of workers, the order of completion nor on which other fits the campaign holds.
+Results go to ``out/<model>/<dataset>/<group>/fit.nc`` (written atomically by
+:meth:`skinfit.Fit.save`) with ``summary.csv`` and ``task.json`` (the fit's specification,
+written after the result).  A fit is complete when its ``task.json`` matches the current
+specification and its ``fit.nc`` opens with the same seed; a restarted campaign (after a
+crash or a kill) skips complete fits and runs only the others.  ``out/index.csv`` and
+``out/index.json`` list every fit (status, seconds, converged, worker, peak memory), rewritten
+after each result; ``out/campaign.log`` records what each run started, skipped and finished.
+
+Executors: local processes (``concurrent.futures.ProcessPoolExecutor``, spawn) by default;
+``--scheduler local`` starts a Dask ``LocalCluster`` (one thread per worker process);
+``--scheduler tcp://HOST:PORT`` submits to a running Dask scheduler, whose workers must see
+the same file system (they read the cards and datasets, and write the results, themselves).
+"""
+
+import json
+import multiprocessing
+import os
+import resource
+import socket
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ._toml import read_toml, require
+from .data import load_dataset
+from .errors import ConvergenceWarning, InputError
+from .fit import fit
+from .groups import _write_json, derive_seed, group_dir, group_labels
+from .models import NOISE_MODELS, load_model
+from .priors import load_priors
+
+__all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit", "cli_campaign"]
+
+_TOP_KEYS = {"schema_version", "seed", "out", "models", "datasets", "by", "scheduler", "workers",
+             "fit", "priors", "split"}
+_FIT_KEYS = {"ess": (float, "ess_target"), "max_steps": (int, "max_steps"), "noise": (str, "noise"),
+             "nwalkers": (int, "nwalkers")}
+_INDEX_COLUMNS = ["model", "dataset", "group", "seed", "status", "seconds", "converged", "path",
+                  "worker", "peak_rss_mb"]
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A validated campaign: its fits (``tasks``, one dict each) and where they go."""
+
+    path: str
+    seed: int
+    out: Path
+    tasks: tuple
+    scheduler: str | None
+    workers: int | None
+
+
+def _resolve(name, base):
+    """A path relative to the campaign file when it names an existing file or folder, else an id."""
+    p = base / name
+    return str(p.resolve()) if ("/" in name or name.endswith(".toml")) and p.exists() else name
+
+
+def _str_list(doc, key, where, required=True):
+    value = doc.get(key)
+    if value is None and not required:
+        return []
+    if isinstance(value, str) and key == "by":
+        value = [value]
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
+        raise InputError(where, f"expected a non-empty list of strings (got {value!r})", field=key)
+    return value
+
+
+def load_campaign(path):
+    """Read and validate a campaign file; every model, prior and dataset is loaded once here."""
+    path = Path(path)
+    doc, _ = read_toml(path)
+    where = str(path)
+    base = path.resolve().parent
+    unknown = set(doc) - _TOP_KEYS
+    if unknown:
+        raise InputError(where, f"unknown keys {sorted(unknown)} (expected {', '.join(sorted(_TOP_KEYS))})")
+    seed = require(doc, "seed", int, where)
+    if seed < 0:
+        raise InputError(where, f"expected an integer >= 0 (got {seed})", field="seed")
+    out = base / require(doc, "out", str, where)
+    scheduler = require(doc, "scheduler", str, where, default=None)
+    if scheduler is not None and scheduler != "local" and "://" not in scheduler:
+        raise InputError(where, f"expected 'local' or an address like tcp://HOST:PORT (got {scheduler!r})",
+                         field="scheduler")
+    workers = require(doc, "workers", int, where, default=None)
+    if workers is not None and workers < 1:
+        raise InputError(where, f"expected an integer >= 1 (got {workers})", field="workers")
+    options = {}
+    fit_doc = require(doc, "fit", dict, where, default={})
+    for key, value in fit_doc.items():
+        if key not in _FIT_KEYS:
+            raise InputError(where, f"unknown fit option (expected {', '.join(_FIT_KEYS)})", field=f"fit.{key}")
+        kind, name = _FIT_KEYS[key]
+        value = require(fit_doc, key, kind, where, field_prefix="fit.")
+        if kind is str and value not in NOISE_MODELS:
+            raise InputError(where, f"expected one of {', '.join(NOISE_MODELS)} (got {value!r})", field=f"fit.{key}")
+        if kind is not str and value <= 0:
+            raise InputError(where, f"expected a number > 0 (got {value})", field=f"fit.{key}")
+        options[name] = value
+
+    models = {}
+    for i, name in enumerate(_str_list(doc, "models", where)):
+        try:
+            models[name] = load_model(_resolve(name, base))
+        except InputError as exc:
+            raise InputError(where, str(exc), field=f"models[{i}]") from None
+    priors_doc = require(doc, "priors", dict, where, default={})
+    split_doc = require(doc, "split", dict, where, default={})
+    for table, key in ((priors_doc, "priors"), (split_doc, "split")):
+        for name in table:
+            if name not in models:
+                raise InputError(where, f"not one of the campaign's models ({', '.join(models)})",
+                                 field=f"{key}.{name}")
+    priors, splits = {}, {}
+    for name, model in models.items():
+        ref = require(priors_doc, name, str, where, field_prefix="priors.", default=model.id)
+        try:
+            prior_set = load_priors(_resolve(ref, base))
+        except InputError as exc:
+            raise InputError(where, str(exc), field=f"priors.{name}") from None
+        missing = [p for p in model.parameter_names if p not in prior_set]
+        if missing:
+            raise InputError(where, f"prior file {prior_set.path} has no prior for {', '.join(missing)}",
+                             field=f"priors.{name}")
+        priors[name] = str(Path(prior_set.path).resolve()) if Path(prior_set.path).exists() else ref
+        split = require(split_doc, name, dict, where, field_prefix="split.", default={})
+        for param, cols in split.items():
+            if param not in model.parameter_names:
+                raise InputError(where, f"model {model.id!r} has no parameter {param!r} (parameters: "
+                                 f"{', '.join(model.parameter_names)})", field=f"split.{name}.{param}")
+            if not (isinstance(cols, str) or (isinstance(cols, list) and cols and all(isinstance(c, str) for c in cols))):
+                raise InputError(where, f"expected a column name or a list of them (got {cols!r})",
+                                 field=f"split.{name}.{param}")
+        splits[name] = split or None
+
+    by = _str_list(doc, "by", where, required=False)
+    tasks = []
+    for i, name in enumerate(_str_list(doc, "datasets", where)):
+        ref = _resolve(name, base)
+        try:
+            dataset = load_dataset(ref)
+        except InputError as exc:
+            raise InputError(where, str(exc), field=f"datasets[{i}]") from None
+        for c in by:
+            if c not in dataset.frame.columns:
+                raise InputError(where, f"dataset {dataset.id!r} has no column {c!r} (columns: "
+                                 f"{', '.join(dataset.frame.columns)})", field="by")
+        levels = group_labels(dataset, by)[1] if by else [""]
+        ref = ref if ref != name else dataset.id
+        for mname, model in models.items():
+            for split_cols in (splits[mname] or {}).values():
+                for c in [split_cols] if isinstance(split_cols, str) else split_cols:
+                    if c not in dataset.frame.columns:
+                        raise InputError(where, f"dataset {dataset.id!r} has no column {c!r}",
+                                         field=f"split.{mname}")
+            for label in levels:
+                rel = Path(model.id) / dataset.id / (group_dir(label) if label else "all") / "fit.nc"
+                tasks.append({"model": model.id, "model_ref": _resolve(mname, base), "dataset": dataset.id,
+                              "dataset_ref": ref, "by": by, "group": label,
+                              "seed": derive_seed(seed, model.id, dataset.id, label),
+                              "priors": priors[mname], "split": splits[mname], "options": options,
+                              "path": str(out / rel)})
+    return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers)
+
+
+def _spec(task):
+    return json.dumps({k: v for k, v in task.items() if k != "path"}, sort_keys=True)
+
+
+def run_fit(task):
+    """Run one campaign fit and write its result (top level and picklable: processes and Dask)."""
+    t0 = time.perf_counter()
+    dataset = load_dataset(task["dataset_ref"])
+    if task["by"]:
+        labels, _ = group_labels(dataset, task["by"])
+        dataset = dataset.subset(np.array(labels, dtype=object) == task["group"], task["group"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)  # recorded in the index instead
+        result = fit(task["model_ref"], dataset, priors=task["priors"], rng=task["seed"], split=task["split"],
+                     **task["options"])
+    path = Path(task["path"])
+    result.save(path)
+    (path.parent / "summary.csv").write_text(result.summary().to_csv())
+    record = {"status": "done", "seconds": round(time.perf_counter() - t0, 3), "converged": result.converged,
+              "worker": f"{socket.gethostname()}:{os.getpid()}",
+              "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
+    _write_json(path.parent / "task.json", {"spec": json.loads(_spec(task)), **record})
+    return record
+
+
+def _completed(task):
+    """The saved record of a complete fit with this specification, or None."""
+    import arviz as az
+
+    path = Path(task["path"])
+    record_path = path.parent / "task.json"
+    if not (path.exists() and record_path.exists()):
+        return None
+    try:
+        record = json.loads(record_path.read_text())
+        if json.dumps(record.get("spec"), sort_keys=True) != _spec(task):
+            return None
+        tree = az.from_netcdf(path)
+        seed = tree.attrs.get("seed")
+        tree.close()
+    except (OSError, ValueError):
+        return None
+    return record if seed == task["seed"] else None
+
+
+def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
+    """Run every fit of a campaign not yet complete; returns the index table.
+
+    Parameters
+    ----------
+    campaign : Campaign or path of a campaign file
+    scheduler : None, "local" or "tcp://HOST:PORT"
+        Overrides the file's ``scheduler``; None (and none in the file) uses local processes.
+    workers : int, optional
+        Local worker processes (or LocalCluster workers); default the file's, else the CPU count.
+    """
+    campaign = campaign if isinstance(campaign, Campaign) else load_campaign(campaign)
+    scheduler = scheduler or campaign.scheduler
+    workers = workers or campaign.workers or os.cpu_count() or 1
+    out = campaign.out
+    out.mkdir(parents=True, exist_ok=True)
+    log = open(out / "campaign.log", "a", buffering=1)
+    executor = scheduler or f"processes x {workers}"
+    log.write(f"{_now()} start {campaign.path} ({len(campaign.tasks)} fits, executor {executor})\n")
+    rows, todo = [], []
+    for i, task in enumerate(campaign.tasks):
+        row = {"model": task["model"], "dataset": task["dataset"], "group": task["group"], "seed": task["seed"],
+               "status": "pending", "seconds": np.nan, "converged": None,
+               "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan}
+        done = _completed(task)
+        if done is not None:
+            row.update({k: done[k] for k in ("seconds", "converged", "worker", "peak_rss_mb")}, status="complete")
+            log.write(f"{_now()} skip {_key(task)} (complete)\n")
+        else:
+            todo.append(i)
+        rows.append(row)
+    _write_index(out, rows)
+    echo(f"campaign {campaign.path}: {len(campaign.tasks)} fits, {len(campaign.tasks) - len(todo)} already "
+         f"complete, {len(todo)} to run ({executor})")
+
+    def finish(i, record=None, error=None):
+        task = campaign.tasks[i]
+        if error is None:
+            rows[i].update(record)
+            log.write(f"{_now()} done {_key(task)} {record['seconds']:.2f} s converged={record['converged']}\n")
+        else:
+            rows[i].update(status=f"failed: {type(error).__name__}: {error}")
+            log.write(f"{_now()} failed {_key(task)}: {type(error).__name__}: {error}\n")
+        _write_index(out, rows)
+        echo(f"  {rows[i]['status']:8s} {_key(task)}" + (f"  {rows[i]['seconds']:.1f} s, converged="
+                                                        f"{rows[i]['converged']}" if error is None else ""))
+
+    try:
+        for i in todo:
+            log.write(f"{_now()} run {_key(campaign.tasks[i])}\n")
+        if todo and scheduler is None:
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+                futures = {pool.submit(run_fit, campaign.tasks[i]): i for i in todo}
+                for fut in as_completed(futures):
+                    _collect(fut, futures[fut], finish)
+        elif todo:
+            _run_dask(campaign, todo, scheduler, workers, finish)
+    finally:
+        log.write(f"{_now()} end\n")
+        log.close()
+    return pd.DataFrame(rows, columns=_INDEX_COLUMNS)
+
+
+def _collect(future, i, finish):
+    try:
+        record = future.result()
+    except Exception as exc:  # a failed fit is recorded in the index; the campaign goes on
+        return finish(i, error=exc)
+    finish(i, record)
+
+
+def _run_dask(campaign, todo, scheduler, workers, finish):
+    from distributed import Client, LocalCluster
+    from distributed import as_completed as dask_completed
+
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout=30)
+        except OSError as exc:
+            raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+    try:
+        futures = {client.submit(run_fit, campaign.tasks[i], key=f"skinfit-fit-{campaign.tasks[i]['seed']}",
+                                 pure=False): i for i in todo}
+        for fut in dask_completed(list(futures)):
+            _collect(fut, futures[fut], finish)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _write_index(out, rows):
+    table = pd.DataFrame(rows, columns=_INDEX_COLUMNS)
+    _write_json(out / "index.json", rows)
+    tmp = out / "index.csv.tmp"
+    table.to_csv(tmp, index=False)
+    os.replace(tmp, out / "index.csv")
+
+
+def _key(task):
+    return f"{task['model']} / {task['dataset']}" + (f" / {task['group']}" if task["group"] else "")
+
+
+def _now():
+    return time.strftime("%Y-%m-%dT%H:%M:%S")
+
+
+def cli_campaign(args):
+    """``skinfit campaign``: run a campaign file and print its index."""
+    t0 = time.perf_counter()
+    campaign = load_campaign(args.campaign)
+    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers)
+    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
+        print(table.drop(columns=["path", "worker"]).to_string(index=False))
+    failed = ~table["status"].isin(["done", "complete"])
+    unconverged = sum(c is False for c in table["converged"])
+    print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
+          f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")
+    return 1 if failed.any() else 0
