@@ -38,11 +38,14 @@ signed = true  # noise can push a small force below zero
 
 
 def write_population(folder, *, n_subjects=13, rows=4, seed=7, median=MU_MEDIAN, tau=TAU, sigma=SIGMA,
-                     name="population"):
-    """Write ``folder/name/{dataset.toml,data.csv}``; returns (path, {subject: true mu})."""
+                     name="population", truths=None):
+    """Write ``folder/name/{dataset.toml,data.csv}``; returns (path, {subject: true mu}).
+
+    ``truths`` ({subject: mu}) replaces the draws from the population when given.
+    """
     rng = np.random.default_rng(seed)
-    truths = {f"S{i + 1:02d}": float(np.exp(np.log(median) + tau * rng.standard_normal()))
-              for i in range(n_subjects)}
+    truths = truths or {f"S{i + 1:02d}": float(np.exp(np.log(median) + tau * rng.standard_normal()))
+                        for i in range(n_subjects)}
     fn = np.linspace(0.2, 1.0, rows)
     lines = ["subject,voltage,normal_force,tangential_force"]
     for subject, mu in truths.items():

@@ -1,0 +1,98 @@
+"""Contrasts between subjects and conditions: differences, ratios and P(theta_A > theta_B).
+
+Two sources of pairs of draws:
+
+* **levels of a split parameter within one fit** (e.g. ``alpha[0]`` vs ``alpha[200]`` of
+  ``fit(..., split={"alpha": "voltage"})``): the draws are paired as sampled (same chain,
+  same draw), so the contrast keeps their posterior correlation;
+* **separate fits** (one per subject, e.g. from ``skinfit fit --by subject``): the posteriors
+  are independent, so each is resampled without replacement (``rng``) to a common length
+  and the draws are paired by index.
+
+For each pair: the posterior of ``A - B`` and of ``A / B`` (mean and highest-density interval,
+ArviZ), and ``P(A > B)`` (the fraction of paired draws with A > B).
+"""
+
+import itertools
+
+import arviz as az
+import numpy as np
+import pandas as pd
+
+from .errors import InputError
+from .fit import _slot_values, as_generator
+
+__all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
+
+
+def draws(fit, name):
+    """Posterior draws (chain-major, flattened) of one sampled slot, e.g. ``"alpha[25]"``."""
+    slots = {s["name"]: s for s in fit.attr("slots")}
+    if name not in slots:
+        raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"no sampled parameter {name!r} "
+                         f"(sampled: {', '.join(slots)})", field="parameter")
+    return _slot_values(fit.idata["posterior"].to_dataset(), slots[name])
+
+
+def contrast(a, b, prob=0.95):
+    """Contrast of paired draws ``a`` and ``b`` (equal length): a dict of summary numbers.
+
+    Keys: ``diff_mean``, ``diff_lower``, ``diff_upper`` (HDI of A - B at ``prob``),
+    ``ratio_median``, ``ratio_lower``, ``ratio_upper`` (HDI of A / B; NaN when B changes
+    sign), ``p_greater`` = P(A > B).
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"expected paired 1-D draws of equal length (got {a.shape} and {b.shape})")
+    diff = a - b
+    lo, hi = np.asarray(az.hdi(diff, prob=prob)).ravel()
+    out = {"diff_mean": float(diff.mean()), "diff_lower": float(lo), "diff_upper": float(hi),
+           "ratio_median": np.nan, "ratio_lower": np.nan, "ratio_upper": np.nan,
+           "p_greater": float(np.mean(a > b))}
+    if np.all(b > 0) or np.all(b < 0):
+        ratio = a / b
+        rlo, rhi = np.asarray(az.hdi(ratio, prob=prob)).ravel()
+        out.update(ratio_median=float(np.median(ratio)), ratio_lower=float(rlo), ratio_upper=float(rhi))
+    return out
+
+
+def _table(named, prob):
+    rows = []
+    for (na, a), (nb, b) in itertools.combinations(named.items(), 2):
+        rows.append({"A": na, "B": nb, **contrast(a, b, prob)})
+    return pd.DataFrame(rows)
+
+
+def level_contrasts(fit, parameter, prob=0.95):
+    """All pairwise contrasts between the levels of a split ``parameter`` within one fit.
+
+    Paired draws (same chain and draw).  Returns a table with one row per pair (A, B).
+    """
+    slots = [s["name"] for s in fit.attr("slots") if s["base"] == parameter and s["level"] is not None]
+    if len(slots) < 2:
+        raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"parameter {parameter!r} is not split "
+                         "into levels in this fit (fit with split={parameter: column})", field="parameter")
+    return _table({s: draws(fit, s) for s in slots}, prob)
+
+
+def fit_contrasts(fits, parameter, rng=None, prob=0.95):
+    """All pairwise contrasts of ``parameter`` between separate fits (independent posteriors).
+
+    Parameters
+    ----------
+    fits : mapping label -> Fit, or the folder of a ``fit --by`` run
+    parameter : str
+        A sampled slot name present in every fit.
+    rng : int, None or numpy.random.Generator
+        Used to resample every posterior to the shortest length before pairing by index.
+    """
+    rng = as_generator(rng)
+    if not isinstance(fits, dict):
+        from .groups import load_groups
+
+        fits = load_groups(fits)
+    if len(fits) < 2:
+        raise InputError("fit_contrasts", f"expected at least two fits (got {len(fits)})", field="fits")
+    values = {label: draws(f, parameter) for label, f in fits.items()}
+    n = min(len(v) for v in values.values())
+    return _table({label: rng.permutation(v)[:n] for label, v in values.items()}, prob)
