@@ -65,6 +65,7 @@ class Model:
     split: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     plot: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     shear: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    linear: tuple = ()  # parameters sampled in natural units although positive
     derived: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     path: str = ""
     sha256: str = ""
@@ -234,6 +235,8 @@ def _parse_model_text(text, where, digest):
         plot=MappingProxyType(dict(require(doc, "plot", dict, where, default={}))),
         shear=MappingProxyType(dict(require(require(doc, "sampling", dict, where, default={}),
                                             "shear", dict, where, field_prefix="sampling.", default={}))),
+        linear=tuple(require(require(doc, "sampling", dict, where, default={}), "linear", list, where,
+                             field_prefix="sampling.", default=[])),
         derived=_derived_table(doc, where),
         path=where,
         sha256=digest,
@@ -245,6 +248,9 @@ def _parse_model_text(text, where, digest):
     for pname, col in model.split.items():
         if pname not in model.parameter_names:
             raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
+    for pname in model.linear:
+        if pname not in model.parameter_names:
+            raise InputError(where, f"names unknown parameter {pname!r}", field="sampling.linear")
     for pname, ref in model.shear.items():
         if pname not in model.parameter_names or not isinstance(ref, str):
             raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "

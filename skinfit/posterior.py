@@ -46,11 +46,12 @@ class Slot:
     hi: float
 
 
-def _transform_for(prior):
+def _transform_for(prior, linear=False):
     """Sampling coordinate: log for non-negative parameters (products the data pin down become
-    linear ridges, which emcee's affine-invariant moves handle well), else the identity.
+    linear ridges, which emcee's affine-invariant moves handle well), else the identity; a card
+    lists in ``[sampling] linear`` positive parameters whose *sums* the data pin down.
     Bounds stay hard: the prior is -inf outside them."""
-    return "log" if prior.lower >= 0 else "identity"
+    return "log" if prior.lower >= 0 and not linear else "identity"
 
 
 class Posterior:
@@ -151,12 +152,14 @@ class Posterior:
                 self.levels[pname] = (self.split[pname], tuple(levels))
                 first = len(slots)
                 for lev in levels:
-                    slots.append(Slot(f"{pname}[{lev}]", pname, lev, prior, _transform_for(prior),
+                    slots.append(Slot(f"{pname}[{lev}]", pname, lev, prior,
+                                      _transform_for(prior, pname in model.linear),
                                       prior.lower, prior.upper))
                 self._param_index[pname] = first + codes  # (n,) gather index
             else:
                 self._param_index[pname] = len(slots)
-                slots.append(Slot(pname, pname, None, prior, _transform_for(prior), prior.lower, prior.upper))
+                slots.append(Slot(pname, pname, None, prior, _transform_for(prior, pname in model.linear),
+                                  prior.lower, prior.upper))
         self.slots = tuple(slots)
         self.names = tuple(s.name for s in slots)
         self.ndim = len(slots)

@@ -54,3 +54,19 @@ def test_unknown_noise_and_missing_field(tmp_path):
 def test_unknown_model_lists_known():
     with pytest.raises(skinfit.InputError, match="no such model .*electroadhesion"):
         skinfit.load_model("nope")
+
+
+def test_sampling_linear_keeps_natural_coordinates(tmp_path):
+    """`[sampling] linear` samples positive parameters in natural units (the empirical power law's
+    b + d ridge is straight there); an unknown name is refused."""
+    from skinfit.posterior import Posterior
+
+    post = Posterior(skinfit.load_model("electroadhesion_empirical"), skinfit.load_priors("electroadhesion_empirical"),
+                     skinfit.load_dataset("electroadhesion_synthetic"))
+    assert {s.name: s.transform for s in post.slots} == {"b": "identity", "c_exp": "log", "d": "identity",
+                                                         "sigma": "log"}
+    text = (ROOT / "models" / "electroadhesion_empirical.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('linear = ["b", "d"]', 'linear = ["b", "e"]'))
+    with pytest.raises(skinfit.InputError, match=r"sampling.linear: names unknown parameter 'e'"):
+        skinfit.load_model(str(bad))
