@@ -92,7 +92,7 @@ class Campaign:
 def _resolve(name, base):
     """A path relative to the campaign file when it names an existing file or folder, else an id."""
     p = base / name
-    return str(p.resolve()) if ("/" in name or name.endswith(".toml")) and p.exists() else name
+    return str(p.resolve()) if p.exists() else name
 
 
 def _str_list(doc, key, where, required=True):
