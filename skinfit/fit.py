@@ -141,7 +141,8 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
         "dataset_provenance": json.dumps(dict(ds.provenance), default=str),
         "units": json.dumps({c.name: c.unit for c in ds.columns if c.unit}),
         "setup": json.dumps({**post.describe(), "constants": post.constants}),
-        "slots": json.dumps([{"name": s.name, "base": s.base, "level": s.level} for s in post.slots]),
+        "slots": json.dumps([{"name": s.name, "base": s.base, "level": s.level, "transform": s.transform}
+                             for s in post.slots]),
         "seed": -1 if seed is None else int(seed),
         "versions": json.dumps(_versions()),
         "map": json.dumps(map_result.as_dict(post.names)),

@@ -143,7 +143,7 @@ def _subject_draws(fit, parameters, n_draws, rng):
                              f"(sampled: {', '.join(slots)})", field="parameters")
         prior = priors[slots[name]["base"]]
         theta = _slot_values(post, slots[name])
-        is_log = _transform_for(prior) == "log"
+        is_log = slots[name].get("transform", _transform_for(prior)) == "log"  # as the fit sampled it
         z = np.log(theta) if is_log else theta
         logp = logp + prior.logpdf(theta) + (z if is_log else 0.0)
         cols.append(z)
