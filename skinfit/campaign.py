@@ -152,7 +152,7 @@ def load_campaign(path):
             if name not in models:
                 raise InputError(where, f"not one of the campaign's models ({', '.join(models)})",
                                  field=f"{key}.{name}")
-    priors, splits = {}, {}
+    priors, splits, prior_hashes = {}, {}, {}
     for name, model in models.items():
         ref = require(priors_doc, name, str, where, field_prefix="priors.", default=model.id)
         try:
@@ -164,6 +164,7 @@ def load_campaign(path):
             raise InputError(where, f"prior file {prior_set.path} has no prior for {', '.join(missing)}",
                              field=f"priors.{name}")
         priors[name] = str(Path(prior_set.path).resolve()) if Path(prior_set.path).exists() else ref
+        prior_hashes[name] = prior_set.sha256
         split = require(split_doc, name, dict, where, field_prefix="split.", default={})
         for param, cols in split.items():
             if param not in model.parameter_names:
@@ -200,6 +201,9 @@ def load_campaign(path):
                               "dataset_ref": ref, "by": by, "group": label,
                               "seed": derive_seed(seed, model.id, dataset.id, label),
                               "priors": priors[mname], "split": splits[mname], "options": options,
+                              # an edited card, prior file or data file makes the fit run again
+                              "sha256": {"model": model.sha256, "priors": prior_hashes[mname],
+                                         "dataset": dataset.sha256},
                               "path": str(out / rel)})
     return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers)
 

@@ -180,3 +180,17 @@ def test_shipped_example_is_valid():
     campaign = load_campaign(Path(skinfit.__file__).resolve().parents[1] / "campaigns" / "example.toml")
     assert len(campaign.tasks) == 9 and campaign.tasks[0]["group"] == "voltage=0"
     assert len({t["seed"] for t in campaign.tasks}) == 9
+
+
+def test_edited_data_makes_the_fit_run_again(tmp_path):
+    """A finished fit is reused only while its model card, prior file and data are unchanged."""
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "edit")
+    assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["done"]
+    assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["complete"]
+    csv = next(p for p in data.iterdir() if p.suffix == ".csv")
+    lines = csv.read_text().splitlines()
+    last = lines[-1].split(",")
+    last[-1] = str(float(last[-1]) * 1.01)
+    csv.write_text("\n".join(lines[:-1] + [",".join(last)]) + "\n")
+    assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["done"]
