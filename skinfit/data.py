@@ -69,6 +69,17 @@ class Dataset:
         return Dataset(f"{self.id}[{suffix}]", self.title, frame, self.columns, self.groups,
                        self.provenance, self.model, self.path, digest)
 
+    def with_observations(self, values, label):
+        """A copy whose observable columns hold ``values`` (column -> (n,) array, SI units), e.g.
+        data simulated on this dataset's design; ``label`` is appended to the id and hashed."""
+        frame = self.frame.copy()
+        h = hashlib.sha256((self.sha256 + label).encode())
+        for col, v in values.items():
+            frame[col] = np.asarray(v, dtype=float)
+            h.update(frame[col].to_numpy().tobytes())
+        return Dataset(f"{self.id}[{label}]", self.title, frame, self.columns, self.groups,
+                       self.provenance, self.model, self.path, h.hexdigest())
+
     def __len__(self):
         return len(self.frame)
 

@@ -97,7 +97,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
 def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_total):
     nw, nd, d = run.chain.shape
     theta = post.to_theta(run.chain.reshape(-1, d))
-    ll, pred, _ = post.pointwise(theta)
+    ll, _, _ = post.pointwise(theta)
     lp_nat = post.log_prior(theta) + sum(v.sum(axis=1) for v in ll.values())
     t_prior = post.sample_prior(n_prior_draws, rng)
     posterior, prior_group, dims, coords = {}, {}, {}, {"obs_id": np.arange(post.n)}
@@ -112,18 +112,8 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
         else:
             posterior[pname] = theta[:, cols[0]].reshape(nw, nd)
             prior_group[pname] = t_prior[:, cols[0]].reshape(1, n_prior_draws)
-    ppc = {}
-    for o in post.observables:
-        mu = pred[o] if np.ndim(pred[o]) == 2 else np.broadcast_to(pred[o], (len(theta), post.n))
-        suffix = "" if len(post.observables) == 1 else f"_{o}"
-        sigma = post.unpack(theta)[f"sigma{suffix}"]
-        eps = rng.standard_normal(mu.shape)
-        if post.noise[o] == "student_t":
-            nu = post.unpack(theta)[f"nu{suffix}"]
-            eps = rng.standard_t(np.broadcast_to(nu, mu.shape))
-        ppc[o] = (np.exp(np.log(mu) + sigma * eps) if post.noise[o] == "lognormal"
-                  else mu + sigma * eps).reshape(nw, nd, post.n)
-        dims[o] = ["obs_id"]
+    ppc = {o: v.reshape(nw, nd, post.n) for o, v in post.simulate(theta, rng).items()}
+    dims.update({o: ["obs_id"] for o in post.observables})
     loglik = {o: v.reshape(nw, nd, post.n) for o, v in ll.items()}
     constant = {c: np.asarray(v) for c, v in post.x.items()}
     for c in post.dataset.frame.columns:

@@ -294,6 +294,30 @@ class Posterior:
         return ({o: np.broadcast_to(v, (k, self.n)) for o, v in ll.items()},
                 {o: np.broadcast_to(v, (k, self.n)) for o, v in pred.items()}, valid)
 
+    def simulate(self, theta, rng):
+        """Simulated observations at each parameter vector: dict observable -> (k, n).
+
+        The model's prediction plus a draw of its noise model (normal, Student-t, log-normal).
+        Rows of ``theta`` outside the physical support raise ``ValueError``.
+        """
+        theta = np.atleast_2d(theta)
+        _, pred, valid = self._evaluate(theta, False)
+        if not np.all(valid):
+            raise ValueError(f"{int((~valid).sum())} parameter vector(s) outside the physical support of "
+                             f"{self.model.id}: {self.model.support}")
+        params = self.unpack(theta)
+        out = {}
+        for o in self.observables:
+            mu = np.broadcast_to(pred[o], (len(theta), self.n))
+            suffix = "" if len(self.observables) == 1 else f"_{o}"
+            sigma = params[f"sigma{suffix}"]
+            if self.noise[o] == "student_t":
+                eps = rng.standard_t(np.broadcast_to(params[f"nu{suffix}"], mu.shape))
+            else:
+                eps = rng.standard_normal(mu.shape)
+            out[o] = np.exp(np.log(mu) + sigma * eps) if self.noise[o] == "lognormal" else mu + sigma * eps
+        return out
+
     def log_likelihood(self, theta):
         ll, _, _ = self._evaluate(np.atleast_2d(theta), False)
         total = None
