@@ -32,6 +32,8 @@ class Column:
     optional: bool = False
     signed: bool = False
     missing_when: tuple | None = None  # (header, label): missing by design exactly on those rows
+    allowed: tuple | None = None  # the only values a row may take (card units), e.g. (-1, 1)
+    positive: bool = False  # values must be > 0 (e.g. a wavelength)
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,8 +110,19 @@ def _columns(doc, where):
         cols.append(Column(header, require(spec, "name", str, where, field_prefix=prefix, default=header),
                            unit, kind, require(spec, "optional", bool, where, field_prefix=prefix, default=False),
                            require(spec, "signed", bool, where, field_prefix=prefix, default=False),
-                           _missing_when(spec, where, prefix, table)))
+                           _missing_when(spec, where, prefix, table), _allowed(spec, where, prefix),
+                           require(spec, "positive", bool, where, field_prefix=prefix, default=False)))
     return tuple(cols)
+
+
+def _allowed(spec, where, prefix):
+    """``allowed = [-1, 1]``: the only values the column may take."""
+    values = require(spec, "allowed", list, where, field_prefix=prefix, default=None)
+    if values is None:
+        return None
+    if not values or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        raise InputError(where, f"expected a non-empty list of numbers (got {values!r})", field=prefix + "allowed")
+    return tuple(float(v) for v in values)
 
 
 def _missing_when(spec, where, prefix, table):
@@ -215,6 +228,14 @@ def read_table(raw, columns, where):
             i = int(np.argmax(values < 0))
             raise InputError(where, f"expected a {dim} >= 0 (got {values[i]:g} {col.unit}; declare "
                              f"`signed = true` if negative values are meaningful)", field=field, row=i + 1)
+        present = ~np.isnan(values)
+        if col.positive and (present & (values <= 0)).any():
+            i = int(np.argmax(present & (values <= 0)))
+            raise InputError(where, f"expected a value > 0 (got {values[i]:g} {col.unit})", field=field, row=i + 1)
+        if col.allowed and (present & ~np.isin(values, col.allowed)).any():
+            i = int(np.argmax(present & ~np.isin(values, col.allowed)))
+            raise InputError(where, f"expected one of {', '.join(f'{v:g}' for v in col.allowed)} "
+                             f"(got {text.iloc[i]!r})", field=field, row=i + 1)
         out[col.name] = values * to_si(col.unit)
     return pd.DataFrame(out)
 

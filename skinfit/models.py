@@ -138,7 +138,7 @@ class Model:
             x[cov.name] = np.asarray(data[cov.name], dtype=float)
         n = len(next(iter(x.values()))) if x else len(data)
         y, ok = self.evaluate(p, x, constants)
-        k = max(v.shape[0] for v in p.values())
+        k = max((v.shape[0] for v in p.values()), default=1)
         valid = np.broadcast_to(ok, (k, n))
         out = {}
         for name, arr in y.items():

@@ -24,8 +24,8 @@ def test_card_matches_function_and_priors(card, rng):
     cov = {c.name: np.linspace(0.5, 1.5, n) for c in model.covariates}
     y, ok = model.evaluate({p: v[:, None] for p, v in params.items()}, cov)
     assert set(y) == set(model.observable_names)
-    for arr in y.values():
-        assert arr.shape == (k, n) and np.all(np.isfinite(arr))
+    for arr in y.values():  # (k, n); a model without parameters may return one row for all
+        assert arr.shape == ((k, n) if model.parameter_names else (1, n)) and np.all(np.isfinite(arr))
     assert np.broadcast_to(ok, (k, n)).shape == (k, n)
 
 

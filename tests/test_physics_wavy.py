@@ -1,0 +1,142 @@
+"""Wavy-surface models (seed 001; MODELS.md section 2): closed forms, the paper's Section 5
+claims, support, vectorisation, the shipped dataset and recovery."""
+
+import importlib.util
+import shutil
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import skinfit
+from recovery import check_coverage
+from skinfit.physics.wavy import ball_bearing_ratio, slope, two_point_ratio
+
+ROOT = Path(skinfit.__file__).resolve().parents[1]
+DATA = ROOT / "datasets" / "wavy_synthetic"
+PAPER = dict(R=7e-3, r=3.4e-3, s=6e-3, mu=0.4, n=-0.3)  # seed 001, Section 6.1
+LAM, A = 0.04, 1.5e-3
+X = np.linspace(0.0, LAM, 4001)[:-1]
+
+
+def _ratio(direction=1, fy=1.0, **kw):
+    p = {**PAPER, **kw}
+    return two_point_ratio(X, A, LAM, direction, fy, p["R"], p["r"], p["s"], p["mu"], p["n"])
+
+
+def test_ball_bearing_ratio_is_the_surface_slope():
+    y = lambda x: A * np.cos(2 * np.pi * x / LAM)  # noqa: E731 - the surface of eq. 1
+    h = 1e-7
+    numeric = (y(X + h) - y(X - h)) / (2 * h)
+    assert np.allclose(ball_bearing_ratio(X, A, LAM), numeric, atol=1e-8)
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+@pytest.mark.parametrize("n", [-0.3, 0.0, 0.3])
+def test_two_point_without_spread_or_friction_is_the_ball_bearing(direction, n):
+    ratio, ok = _ratio(direction, r=0.0, mu=0.0, n=n)
+    assert ok.all()
+    assert np.allclose(ratio, slope(X, A, LAM), atol=1e-15)
+
+
+def _phases(ratio):
+    """Lengths of the rising (trough -> next peak, along +x) and falling phases."""
+    lo, hi = X[np.argmin(ratio)], X[np.argmax(ratio)]
+    rising = (hi - lo) % LAM
+    return rising, LAM - rising
+
+
+def test_skewed_rising_phase_shorter_for_rightward_sliding():
+    rising, falling = _phases(_ratio(1)[0])
+    assert rising < 0.95 * falling          # Section 5.1: rises rapidly, falls slowly
+    bb_rising, bb_falling = _phases(slope(X, A, LAM))
+    assert bb_rising == pytest.approx(bb_falling, abs=2 * (X[1] - X[0]))  # symmetric without contact spread
+    r_small, f_small = _phases(_ratio(1, r=1.5e-3)[0])  # Fig. 10: larger r, more skew
+    assert rising / falling < r_small / f_small < 1.0
+
+
+def test_direction_flips_the_base_shift_and_load_lowers_it():
+    up, down = _ratio(1)[0].mean(), _ratio(-1)[0].mean()
+    assert up > 0.2 and down < -0.2 and up == pytest.approx(-down)  # slope averages to 0
+    light, heavy = _ratio(1, fy=0.9)[0].mean(), _ratio(1, fy=2.4)[0].mean()
+    assert heavy < light                    # n < 0: larger load, smaller ratio (Section 6.2)
+    assert _ratio(1, fy=2.4, n=0.0)[0].mean() == pytest.approx(_ratio(1, fy=0.9, n=0.0)[0].mean())
+
+
+def test_support_limits():
+    _, ok = _ratio(1, s=0.5e-3, r=3.4e-3)   # both points far outside a narrow profile
+    assert not ok.all()
+    _, ok = two_point_ratio(X, 2.5e-3, 0.02, 1, 0.05, 7e-3, 3.4e-3, 6e-3, 1.5, -0.5)  # cone locks
+    assert not ok.all()
+    ratio, ok = _ratio(1)
+    assert ok.all() and np.all(np.isfinite(ratio))
+
+
+def test_vectorised_over_parameter_ensembles(rng):
+    model = skinfit.load_model("wavy_surface")
+    priors = skinfit.load_priors("wavy_surface")
+    ds = skinfit.load_dataset("wavy_synthetic")
+    params = {p: priors[p].rvs(5, rng) for p in model.parameter_names}
+    together = model.predict(params, ds.frame)
+    for i in range(5):
+        one = model.predict({p: v[i] for p, v in params.items()}, ds.frame)
+        assert np.allclose(one.ravel(), together[i], equal_nan=True)
+
+
+def test_variants():
+    ds = skinfit.load_dataset("wavy_synthetic")
+    bb = skinfit.load_model("wavy_ball_bearing").predict({}, ds.frame).ravel()
+    f = ds.frame
+    assert np.allclose(bb, slope(f["position"], f["amplitude"], f["wavelength"]))
+    coulomb = skinfit.load_model("wavy_two_point_coulomb")
+    full = skinfit.load_model("wavy_surface")
+    p = {k: v for k, v in PAPER.items() if k != "n"}
+    a = coulomb.predict(p, f)
+    b = full.predict({**p, "n": 0.0}, f)
+    assert np.allclose(a, b)
+
+
+# ---- the shipped dataset ----------------------------------------------------------------
+
+def test_make_regenerates_data_byte_for_byte(tmp_path):
+    spec = importlib.util.spec_from_file_location("make_wavy", DATA / "make.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(tmp_path / "data.csv")
+    assert (tmp_path / "data.csv").read_bytes() == (DATA / "data.csv").read_bytes()
+
+
+@pytest.mark.parametrize("column, value, match", [
+    ("direction", "0", r"column 'direction', row 4: expected one of -1, 1 \(got '0'\)"),
+    ("wavelength", "-20", r"column 'wavelength', row 4: expected a value > 0"),
+    ("amplitude", "", r"column 'amplitude', row 4: missing value"),
+    ("normal_force", "-1", r"column 'normal_force', row 4: expected a force >= 0"),
+])
+def test_bad_covariates_are_refused(tmp_path, column, value, match):
+    d = tmp_path / "wavy"
+    shutil.copytree(DATA, d)
+    lines = (d / "data.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[4].split(",")
+    cells[header.index(column)] = value
+    lines[4] = ",".join(cells)
+    (d / "data.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(skinfit.InputError, match=match):
+        skinfit.load_dataset(d)
+
+
+def test_recovery_on_the_shipped_dataset():
+    truth = tomllib.loads((DATA / "dataset.toml").read_text())["provenance"]["generating_parameters"]
+    fit = skinfit.fit("wavy_surface", "wavy_synthetic", rng=1, split={"r": "wavelength", "s": "wavelength"})
+    assert fit.converged
+    post = fit.idata["posterior"].to_dataset()
+    checks = [(p, post[p].values, truth[p]) for p in ("R", "mu", "n")]
+    checks.append(("sigma", post["sigma"].values, 0.05))
+    for p in ("r", "s"):
+        dim = [d for d in post[p].dims if d not in ("chain", "draw")][0]
+        for level in post[p][dim].values:
+            key = f"{float(level) * 1e3:g}" if float(level) < 1 else f"{float(level):g}"
+            checks.append((f"{p}[{level}]", post[p].sel({dim: level}).values, truth[p][key]))
+    assert len(checks) == 12
+    check_coverage(checks)
