@@ -41,7 +41,7 @@ UNITS = {
 }
 
 # Quantities that are physically non-negative unless a column is declared `signed = true`.
-NONNEGATIVE = {"force", "area", "pressure", "frequency", "voltage", "impedance", "time"}
+NONNEGATIVE = {"force", "length", "area", "pressure", "frequency", "voltage", "impedance", "time"}
 
 
 def to_si(unit):

@@ -109,7 +109,8 @@ def test_make_regenerates_data_byte_for_byte(tmp_path):
 
 @pytest.mark.parametrize("column, value, match", [
     ("direction", "0", r"column 'direction', row 4: expected one of -1, 1 \(got '0'\)"),
-    ("wavelength", "-20", r"column 'wavelength', row 4: expected a value > 0"),
+    ("wavelength", "-20", r"column 'wavelength', row 4: expected a length >= 0"),
+    ("wavelength", "0", r"column 'wavelength', row 4: expected a value > 0"),
     ("amplitude", "", r"column 'amplitude', row 4: missing value"),
     ("normal_force", "-1", r"column 'normal_force', row 4: expected a force >= 0"),
 ])
