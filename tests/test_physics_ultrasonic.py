@@ -81,6 +81,28 @@ def test_period_average_of_a_known_function():
     assert got[0] == pytest.approx(exact, rel=1e-10)
 
 
+@pytest.mark.parametrize("v, angle, amp", [(0.03, 0.0, 1.6e-6), (0.1, 0.0, 0.4e-6), (0.06, math.pi / 2, 1.6e-6),
+                                           (0.02, 0.4, 1.2e-6), (0.14, 1.2, 0.8e-6)])
+def test_period_average_agrees_with_adaptive_quadrature(v, angle, amp):
+    """The model's prediction equals the period average of eq. 5 done independently by
+    scipy's adaptive quad over the whole period, told where v_x changes sign."""
+    from scipy.integrate import quad
+
+    omega = 2 * math.pi * 58e3
+    vx0, vy = v * math.cos(angle), v * math.sin(angle)
+
+    def mu_of_t(t):
+        speed = math.hypot(vx0 - omega * amp / 2 * math.cos(omega * t), vy)
+        star = us.mu_speed(speed, PAPER["mu_inf"], PAPER["mu_0"], PAPER["k_V"])
+        return float(us.mu_equilibrium(np.array(speed), star, PAPER["q"], PAPER["V0"]))
+
+    period = 1 / 58e3
+    c = vx0 / (omega * amp / 2)
+    kinks = [math.acos(c) / omega, period - math.acos(c) / omega] if abs(c) < 1 else None
+    exact = quad(mu_of_t, 0, period, points=kinks, epsabs=1e-13, epsrel=1e-12, limit=200)[0] / period
+    assert _mu("ultrasonic", v, angle=angle, amp=amp)[0] == pytest.approx(exact, abs=1e-8)  # measured: <= 4.2e-9
+
+
 def test_variants_agree_without_vibration():
     v = np.linspace(0.02, 0.14, 7)
     full = _mu("ultrasonic", v)
@@ -121,6 +143,8 @@ def test_make_regenerates_data_byte_for_byte(tmp_path):
     ("amplitude_pp", "-0.4", r"column 'amplitude_pp', row 5: expected a length >= 0"),
     ("direction_angle", "", r"column 'direction_angle', row 5: missing value"),
     ("frequency", "fast", r"column 'frequency', row 5: expected a number in kHz"),
+    ("velocity", "nan", r"column 'velocity', row 5: missing value"),
+    ("frequency", "0", r"column 'frequency', row 5: expected a value > 0"),
 ])
 def test_bad_covariates_are_refused(tmp_path, column, value, match):
     d = tmp_path / "us"

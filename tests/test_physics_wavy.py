@@ -4,6 +4,7 @@ claims, support, vectorisation, the shipped dataset and recovery."""
 import importlib.util
 import shutil
 import tomllib
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,31 @@ def test_direction_flips_the_base_shift_and_load_lowers_it():
     assert _ratio(1, fy=2.4, n=0.0)[0].mean() == pytest.approx(_ratio(1, fy=0.9, n=0.0)[0].mean())
 
 
+def test_leftward_sliding_is_the_mirror_image():
+    """The surface is even in x: reflecting x -> -x turns leftward sliding into rightward sliding
+    and flips the sign of the horizontal force, so ratio(x, -1) = -ratio(-x, +1)."""
+    left, ok_left = _ratio(-1)
+    mirror = two_point_ratio(-X, A, LAM, 1, 1.0, *(PAPER[k] for k in ("R", "r", "s", "mu", "n")))[0]
+    assert ok_left.all()
+    assert np.allclose(left, -mirror, atol=1e-13)
+
+
+def test_an_unloaded_point_contributes_nothing():
+    """On the steep flank only the uphill point lies under the shifted pressure profile: the ratio
+    is that one ball's, (g + mu*f**n)/(1 - mu*f**n*g) with the whole load f = f_y (eqs. 9, 11),
+    even for n < 0, where the unloaded point's mu*0**n would be infinite."""
+    a, lam, fy = 2.5e-3, 0.02, 1.3
+    R, r, s, mu, n = 7e-3, 3e-3, 2e-3, 0.4, -0.3
+    x = np.array([-lam / 4, lam / 4])           # steepest up- and down-slope
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")           # no 0*inf, no division warnings
+        ratio, ok = two_point_ratio(x, a, lam, 1, fy, R, r, s, mu, n)
+    g_up = slope(x + np.array([r, -r]), a, lam)  # the loaded point is the uphill one
+    m = mu * fy**n
+    assert ok.all()
+    assert np.allclose(ratio, (g_up + m) / (1 - m * g_up), rtol=1e-12)
+
+
 def test_support_limits():
     _, ok = _ratio(1, s=0.5e-3, r=3.4e-3)   # both points far outside a narrow profile
     assert not ok.all()
@@ -113,6 +139,9 @@ def test_make_regenerates_data_byte_for_byte(tmp_path):
     ("wavelength", "0", r"column 'wavelength', row 4: expected a value > 0"),
     ("amplitude", "", r"column 'amplitude', row 4: missing value"),
     ("normal_force", "-1", r"column 'normal_force', row 4: expected a force >= 0"),
+    ("direction", "NaN", r"column 'direction', row 4: missing value"),
+    ("amplitude", "-0.5", r"column 'amplitude', row 4: expected a length >= 0"),
+    ("position", "inf", r"column 'position', row 4: expected a finite number"),
 ])
 def test_bad_covariates_are_refused(tmp_path, column, value, match):
     d = tmp_path / "wavy"
