@@ -91,23 +91,33 @@ def test_an_unloaded_point_contributes_nothing():
 
 
 def test_support_limits():
-    _, ok = _ratio(1, s=0.5e-3, r=3.4e-3)   # both points far outside a narrow profile
-    assert not ok.all()
-    _, ok = two_point_ratio(X, 2.5e-3, 0.02, 1, 0.05, 7e-3, 3.4e-3, 6e-3, 1.5, -0.5)  # cone locks
-    assert not ok.all()
+    # |shift| <= R*sin(arctan(2*pi*a/lambda)) = 1.6 mm, so |+-r - shift| >= 1.8 mm > s: no point loaded
+    _, ok = _ratio(1, s=0.5e-3, r=3.4e-3)
+    assert not ok.any()
+    # light load, sticky skin: mu_pm >= 1.5*0.05**-0.5 = 6.7, so the cone locks where a loaded
+    # point climbs a slope > 0.15; where both points go downhill (g <= 0) 1 - mu_pm*g >= 1
+    a, lam, r = 2.5e-3, 0.02, 3.4e-3
+    _, ok = two_point_ratio(X, a, lam, 1, 0.05, 7e-3, r, 6e-3, 1.5, -0.5)
+    downhill = (slope(X + r, a, lam) <= 0) & (slope(X - r, a, lam) <= 0)
+    assert ok[downhill].all() and not ok.all()
+    assert not ok[np.argmax(slope(X, a, lam))]  # steepest climb: the loaded point climbs 0.38
     ratio, ok = _ratio(1)
     assert ok.all() and np.all(np.isfinite(ratio))
 
 
-def test_vectorised_over_parameter_ensembles(rng):
-    model = skinfit.load_model("wavy_surface")
-    priors = skinfit.load_priors("wavy_surface")
+@pytest.mark.parametrize("name", ["wavy_surface", "wavy_two_point_coulomb"])
+def test_vectorised_over_parameter_ensembles(rng, name):
+    """64 prior draws at once give what 64 separate calls give (NaN where outside the support)."""
+    model, priors = skinfit.load_model(name), skinfit.load_priors(name)
     ds = skinfit.load_dataset("wavy_synthetic")
-    params = {p: priors[p].rvs(5, rng) for p in model.parameter_names}
-    together = model.predict(params, ds.frame)
-    for i in range(5):
-        one = model.predict({p: v[i] for p, v in params.items()}, ds.frame)
-        assert np.allclose(one.ravel(), together[i], equal_nan=True)
+    params = {p: priors[p].rvs(64, rng) for p in model.parameter_names}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.SupportWarning)
+        together = model.predict(params, ds.frame)
+        assert together.shape == (64, len(ds)) and np.isfinite(together).mean() > 0.9
+        for i in range(64):
+            one = model.predict({p: v[i] for p, v in params.items()}, ds.frame)
+            assert np.allclose(one.ravel(), together[i], rtol=1e-12, atol=1e-15, equal_nan=True)
 
 
 def test_variants():
