@@ -13,7 +13,9 @@ each smooth piece. MODELS.md suggests the midpoint rule; measured on the shipped
 paper's parameters, the midpoint rule over the half period changed by 6e-3 from 48 to 96 phases
 and still by 2e-5 from 1000 to 2000 (O(h^2) at the kink), while ``PHASES`` = 48 Gauss-Legendre
 nodes per piece change the average by < 1e-8 when doubled (32 would give 4e-7; the test asks
-< 1e-6: tests/test_physics_ultrasonic.py).
+< 1e-6: tests/test_physics_ultrasonic.py). Off the shipped angles it is slowest near 0.01 rad,
+where v_x has a sharp minimum of width ~ v_y (1.3e-6 on doubling; 2e-7 at 0.05 rad). Memory:
+the integrand is evaluated on (k, rows, 2*PHASES) arrays, about six at the peak.
 """
 
 import numpy as np
@@ -25,13 +27,16 @@ __all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic
 PHASES = 48
 
 
-def _bracket(u):
-    """``Vs*(1 - exp(-1/Vs)) - exp(-1/Vs)`` with ``u = 1/Vs``, cancellation-free for small u."""
-    e = np.exp(-u)
+def _bracket(u, e):
+    """``Vs*(1 - exp(-1/Vs)) - exp(-1/Vs)`` with ``u = 1/Vs``, ``e = exp(-u)``; cancellation-free
+    for small u (series there)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        direct = -np.expm1(-u) / u - e
-    series = u / 2 - u**2 / 3 + u**3 / 8 - u**4 / 30
-    return np.where(u < 1e-2, series, direct)
+        out = np.asarray(-np.expm1(-u) / u - e)
+    small = u < 1e-2
+    if small.any():
+        s = u[small]  # sum_j (-1)^(j+1) j u^j/(j+1)!, to j = 6
+        out[small] = s * (1 / 2 - s * (1 / 3 - s * (1 / 8 - s * (1 / 30 - s * (1 / 144 - s / 840)))))
+    return out
 
 
 def mu_equilibrium(v, mu_star, q, v0):
@@ -42,9 +47,9 @@ def mu_equilibrium(v, mu_star, q, v0):
     """
     moving = v > 0.0
     with np.errstate(divide="ignore"):
-        u = np.where(moving, v0 / np.where(moving, v, 1.0), np.inf)
+        u = np.where(moving, v0 / np.where(moving, v, 1.0), 1.0)
     e = np.exp(-u)
-    value = 2.0 * mu_star * (q + 1.0) * _bracket(np.where(moving, u, 1.0)) / (1.0 + q - e)
+    value = 2.0 * mu_star * (q + 1.0) * _bracket(u, e) / (1.0 + q - e)
     return np.where(moving, value, 0.0)
 
 
@@ -122,6 +127,11 @@ def _average(mu_of_speed, x, projected=False):
     return period_average(integrand, v, angle, amp, freq)
 
 
+def _support(p):
+    """mu*(V) of eq. 4 lies between mu_inf and 2*mu_inf - mu_0: positive iff mu_0 < 2*mu_inf."""
+    return 2.0 * p["mu_inf"] - p["mu_0"] > 0.0
+
+
 def ultrasonic(p, x, c):
     """Friction coefficient: period average of mu_E(|v_r|) with mu* = mu*(|v_r|) (eqs. 3-5).
 
@@ -132,7 +142,7 @@ def ultrasonic(p, x, c):
         return mu_equilibrium(speed, mu_speed(speed, p["mu_inf"][..., None], p["mu_0"][..., None], p["k_V"][..., None]),
                               p["q"][..., None], p["V0"][..., None])
 
-    return {"friction_coefficient": _average(mu, x)}, np.True_
+    return {"friction_coefficient": _average(mu, x)}, _support(p)
 
 
 def ultrasonic_projected(p, x, c):
@@ -142,11 +152,17 @@ def ultrasonic_projected(p, x, c):
         return mu_equilibrium(speed, mu_speed(speed, p["mu_inf"][..., None], p["mu_0"][..., None], p["k_V"][..., None]),
                               p["q"][..., None], p["V0"][..., None])
 
-    return {"friction_coefficient": _average(mu, x, projected=True)}, np.True_
+    return {"friction_coefficient": _average(mu, x, projected=True)}, _support(p)
 
 
 def ultrasonic_constant_mu(p, x, c):
-    """Eq. 1 of seed 004 (eq. 3 with a constant friction factor ``mu_plus``), period-averaged."""
+    """Eq. 1 of seed 004, period-averaged: eq. 3 with the constant ``mu_plus`` in place of mu*(V).
+
+    Read literally: ``mu_plus`` is the prefactor of eq. 1 (the printed brace holds the whole
+    fraction), not the peak of mu_E as the paper's prose calls it; at q = 0.0177 the curve
+    peaks at 0.905*mu_plus at V = 3.26*V0. At zero amplitude it equals :func:`ultrasonic` at
+    any single speed V where ``mu_plus = mu*(V)`` (eq. 4).
+    """
     def mu(speed):
         return mu_equilibrium(speed, p["mu_plus"][..., None], p["q"][..., None], p["V0"][..., None])
 

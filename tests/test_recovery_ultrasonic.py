@@ -1,0 +1,91 @@
+"""Shipped ultrasonic dataset (seed 004's design, simulated): regeneration, bad covariates
+refused at the data boundary, recovery of the generating parameters (truths inside 95%
+credible intervals, calibrated rule of tests/recovery.py)."""
+
+import importlib.util
+import math
+import shutil
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import skinfit
+from recovery import check_coverage
+
+ROOT = Path(skinfit.__file__).resolve().parents[1]
+DATA = ROOT / "datasets" / "ultrasonic_synthetic"
+CARD = tomllib.loads((DATA / "dataset.toml").read_text())["provenance"]
+
+
+def test_make_regenerates_data_byte_for_byte(tmp_path):
+    spec = importlib.util.spec_from_file_location("make_ultrasonic", DATA / "make.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main(tmp_path / "data.csv")
+    assert (tmp_path / "data.csv").read_bytes() == (DATA / "data.csv").read_bytes()
+
+
+def test_design_is_the_papers():
+    """Seed 004: 20-140 mm/s in steps of 20 (Section III.B); 0, 0.8, 1, 1.2, 1.4, 1.6 um p-p at
+    58 kHz (Section III.C); finger motion along x and y; 8 participants. Lab units converted."""
+    ds = skinfit.load_dataset("ultrasonic_synthetic")
+    f = ds.frame
+    assert np.allclose(np.unique(f["velocity"]), np.arange(20, 141, 20) * 1e-3, rtol=1e-12)
+    assert np.allclose(np.unique(f["amplitude_pp"]), np.array([0, 0.8, 1.0, 1.2, 1.4, 1.6]) * 1e-6, rtol=1e-12)
+    assert np.allclose(np.unique(f["direction_angle"]), [0.0, math.pi / 2], rtol=1e-12)
+    assert np.allclose(f["frequency"], 58e3) and f["subject"].nunique() == 8 and len(ds) == 252
+
+
+def _edit(tmp_path, row, column, value):
+    d = tmp_path / "us"
+    shutil.copytree(DATA, d)
+    lines = (d / "data.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[row].split(",")
+    cells[header.index(column)] = value
+    lines[row] = ",".join(cells)
+    (d / "data.csv").write_text("\n".join(lines) + "\n")
+    return d
+
+
+@pytest.mark.parametrize("column, value, match", [
+    ("velocity", "-20", r"expected a value > 0 \(got -20 mm/s\)"),
+    ("velocity", "0", r"expected a value > 0"),
+    ("velocity", "nan", r"missing value \(expected a number in mm/s"),
+    ("velocity", "inf", r"expected a finite number"),
+    ("amplitude_pp", "-0.4", r"expected a length >= 0 \(got -0.4 um"),
+    ("amplitude_pp", "NaN", r"missing value \(expected a number in um"),
+    ("direction_angle", "", r"missing value \(expected a number in deg"),
+    ("frequency", "fast", r"expected a number in kHz \(got 'fast'\)"),
+    ("frequency", "0", r"expected a value > 0"),
+])
+def test_bad_covariates_are_refused_naming_file_column_row(tmp_path, column, value, match):
+    d = _edit(tmp_path, 5, column, value)
+    with pytest.raises(skinfit.InputError, match=rf"data.csv: column '{column}', row 5: {match}"):
+        skinfit.load_dataset(d)
+
+
+def test_negative_angles_are_meaningful(tmp_path):
+    """gamma_f = -pi/2 (seed 004 Section IV.C uses +-pi/2): accepted, and the model is even in it."""
+    d = _edit(tmp_path, 5, "direction_angle", "-90")
+    ds = skinfit.load_dataset(d)
+    assert ds.frame["direction_angle"].iloc[4] == pytest.approx(-math.pi / 2)
+    model = skinfit.load_model("ultrasonic")
+    y = model.predict(CARD["generating_parameters"], ds.frame.iloc[[4, 5]].assign(direction_angle=[-1.0, 1.0]))
+    assert y[0] == pytest.approx(y[1], rel=1e-13)
+
+
+@pytest.fixture(scope="module")
+def fit():
+    return skinfit.fit("ultrasonic", "ultrasonic_synthetic", rng=1)
+
+
+def test_recovery_truth_in_95_interval(fit):
+    assert fit.converged
+    post = fit.idata["posterior"].to_dataset()
+    truth = {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]}
+    check_coverage([(name, post[name].values, value) for name, value in truth.items()])
+    # 252 rows pin the noise level to about +-9% (sd of its estimate ~ sigma/sqrt(2n))
+    assert post["sigma"].quantile(0.025) > 0.8 * truth["sigma"] and post["sigma"].quantile(0.975) < 1.2 * truth["sigma"]
