@@ -491,12 +491,14 @@ def plot_ppc(fit, path=None):
                            linewidth=0.4, zorder=3, gid="data")
                 xs, ys = curves[p * len(colour_labels) + c]
                 ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
-                if r == 0:
-                    idx = np.flatnonzero(keys == p * len(colour_labels) + c)
-                    ref = _reference(spec, fit, idx, xs)
-                    if ref is not None:
-                        ax.plot(xs / x_factor, ref / f, color="0.35", lw=1.1, ls="--", zorder=2, gid="reference")
-                        reference_drawn = True
+            if r == 0:  # one reference curve per panel, on a fine grid over the panel's x range
+                idx = np.flatnonzero(keys // len(colour_labels) == p)
+                x_si = np.asarray(_group(fit, "constant_data")[spec["x"]].values, dtype=float)[idx]
+                grid = np.linspace(x_si.min(), x_si.max(), _N_GRID) if idx.size else x_si
+                ref = _reference(spec, fit, idx, grid) if idx.size else None
+                if ref is not None:
+                    ax.plot(grid / x_factor, ref / f, color="0.35", lw=1.1, ls="--", zorder=2, gid="reference")
+                    reference_drawn = True
             ax.set_xlabel(x_label)
             ax.set_ylabel(axis_label(o, units.get(o)))
             ax.set_xscale(spec["xscale"])
