@@ -147,9 +147,10 @@ def run_bare_emcee(post, seed, chunk=1000, max_steps=40000, burn_fraction=0.25, 
         t_map = time.perf_counter() - t0
         sampler = emcee.EnsembleSampler(len(p0), post.ndim, post, vectorize=True, moves=default_moves())
         state = emcee.State(p0, random_state=state)
-        t_checks = 0.0
+        t_checks, marks = 0.0, [(0, t_map)]
         while sampler.iteration < max_steps:
             state = sampler.run_mcmc(state, chunk, progress=False)
+            marks.append((sampler.iteration, time.perf_counter() - t0))
             tc = time.perf_counter()
             chain = sampler.get_chain()
             n = chain.shape[0]
@@ -165,10 +166,17 @@ def run_bare_emcee(post, seed, chunk=1000, max_steps=40000, burn_fraction=0.25, 
             f"checks {t_checks:.1f} s")
     return Result("bare emcee loop on skinfit's log-density", wall, ess, rhat, post.counts["evaluations"],
                   mem.mb, note, extra={"chain": sampler.get_chain(), "steps": sampler.iteration,
-                                       "map_s": t_map, "checks_s": t_checks})
+                                       "map_s": t_map, "checks_s": t_checks, "marks": marks})
 
 
-def run_dynesty(post, seed, nlive=400, sample="rslice"):
+def wall_at_step(marks, n):
+    """Wall time [s] the bare loop had spent (MAP included, its checks excluded) when its chain
+    reached ``n`` steps, interpolated between chunk ends; None if it stopped earlier."""
+    steps, walls = np.array(marks, dtype=float).T
+    return float(np.interp(n, steps, walls)) if n <= steps[-1] else None
+
+
+def run_dynesty(post, seed, nlive=400, sample="rslice", maxcall=None):
     """dynesty static nested sampling (default stopping dlogz) on the natural parameters.
 
     ESS is dynesty's own estimate, the Kish effective size of the importance weights
@@ -190,7 +198,7 @@ def run_dynesty(post, seed, nlive=400, sample="rslice"):
         rstate = np.random.default_rng(seed)
         sampler = dynesty.NestedSampler(loglike, prior_transform, post.ndim, nlive=nlive, sample=sample,
                                         rstate=rstate)
-        sampler.run_nested(print_progress=False)
+        sampler.run_nested(maxcall=maxcall, print_progress=False)
         res = sampler.results
         wall = time.perf_counter() - t0
     ess = float(get_neff_from_logwt(res.logwt))
@@ -199,7 +207,8 @@ def run_dynesty(post, seed, nlive=400, sample="rslice"):
     _, rhat = diagnostics(equal.reshape(4, -1, post.ndim))
     evals = int(np.sum(res.ncall))
     return Result(f"dynesty {sample}, {nlive} live", wall, ess, rhat, evals, mem.mb,
-                  f"logZ {res.logz[-1]:.2f} +- {res.logzerr[-1]:.2f}; {len(res.logl)} dead+live points")
+                  f"logZ {res.logz[-1]:.2f} +- {res.logzerr[-1]:.2f}; {len(res.logl)} dead+live points"
+                  + (f"; stopped at maxcall {maxcall}" if maxcall and evals >= maxcall else ""))
 
 
 def throughput(func, z, seconds=1.0):
