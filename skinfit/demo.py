@@ -80,13 +80,17 @@ def _run_one(item, path):
             "converged": result.converged}
 
 
-def _done(path, seed):
+def _done(path, item):
+    """A saved fit with this item's seed on the same data (an edited dataset is fitted again)."""
     if not path.exists():
         return False
+    from .data import load_dataset
     from .fit import load_fit
 
     try:
-        return int(load_fit(path).idata.attrs.get("seed", -1)) == seed
+        attrs = load_fit(path).idata.attrs
+        data = _select(load_dataset(item["dataset"]), item["rows"])
+        return int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
     except Exception:  # a damaged or foreign file: fit again
         return False
 
@@ -100,7 +104,7 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     out = Path(out)
     plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]
     paths = [out / p["dataset"] / p["model"] / "fit.nc" for p in plan]
-    todo = [(p, path) for p, path in zip(plan, paths) if not _done(path, p["seed"])]
+    todo = [(p, path) for p, path in zip(plan, paths) if not _done(path, p)]
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
          f"datasets ({len(plan) - len(todo)} already done under {out})")
     for p in plan:
