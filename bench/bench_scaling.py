@@ -77,7 +77,7 @@ def main():
         lines.append(f"| {r[0]} | {r[1]:.2f} | {r[2]:.2f} | {r[3]:.1f} | {r[4]:.1f} | {r[5]:.1f} | {r[6]} | "
                      f"{r[7]:.2f} | {r[8]:.0f} | {r[9]:.0f} | {r[10]:.4f} | {'yes' if r[11] else 'no'} |")
     lines += ["", f"Least-squares line, per-evaluation cost (32 walkers): {icpt:.2f} us + {1e3 * slope:.2f} ns x rows; "
-              f"sampling cost per step: {icpt_step:.2f} ms + {1e3 * slope_step:.2f} us x rows (fixed per-call "
+              f"sampling cost per step: {icpt_step:.2f} ms {1e3 * slope_step:+.2f} us x rows (fixed per-call "
               "overhead of emcee and numpy dominates below a few hundred rows)."]
     out = RESULTS / "scaling.md"
     out.write_text("\n".join(lines) + "\n")
