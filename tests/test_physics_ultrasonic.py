@@ -100,14 +100,6 @@ def test_period_average_agrees_with_adaptive_quadrature(v, angle, amp):
     assert _mu("ultrasonic", v, angle=angle, amp=amp)[0] == pytest.approx(exact, abs=1e-8)  # measured: <= 4.2e-9
 
 
-def test_variants_agree_without_vibration():
-    v = np.linspace(0.02, 0.14, 7)
-    full = _mu("ultrasonic", v)
-    assert np.allclose(_mu("ultrasonic_projected", v), full, rtol=1e-12)  # v_r along u_f: factor 1
-    star = us.mu_speed(0.06, PAPER["mu_inf"], PAPER["mu_0"], PAPER["k_V"])
-    assert _mu("ultrasonic_constant_mu", 0.06, mu_plus=star) == pytest.approx(_mu("ultrasonic", 0.06), rel=1e-12)
-
-
 def test_vibration_across_motion_lowers_the_projected_friction():
     v = np.linspace(0.02, 0.14, 7)
     full = _mu("ultrasonic", v, amp=1.6e-6)
@@ -116,13 +108,15 @@ def test_vibration_across_motion_lowers_the_projected_friction():
 
 
 def test_vectorised_and_finite_over_prior_draws(rng):
+    """k = 64 prior draws at once == 64 separate calls, all finite (no support refusals: the
+    prior box lies inside mu_0 < 2*mu_inf), on the shipped rows."""
     ds = skinfit.load_dataset("ultrasonic_synthetic")
     for name in ("ultrasonic", "ultrasonic_projected", "ultrasonic_constant_mu"):
         model, priors = skinfit.load_model(name), skinfit.load_priors(name)
-        params = {p: priors[p].rvs(200, rng) for p in model.parameter_names}
+        params = {p: priors[p].rvs(64, rng) for p in model.parameter_names}
         together = model.predict(params, ds.frame)
-        assert together.shape == (200, len(ds)) and np.all(np.isfinite(together))
-        for i in (0, 199):
+        assert together.shape == (64, len(ds)) and np.all(np.isfinite(together))
+        for i in range(64):
             one = model.predict({p: v[i] for p, v in params.items()}, ds.frame)
             assert np.allclose(one, together[i], rtol=1e-13)
 

@@ -77,15 +77,45 @@ def test_negative_angles_are_meaningful(tmp_path):
     assert y[0] == pytest.approx(y[1], rel=1e-13)
 
 
-@pytest.fixture(scope="module")
-def fit():
-    return skinfit.fit("ultrasonic", "ultrasonic_synthetic", rng=1)
-
-
-def test_recovery_truth_in_95_interval(fit):
+def _check(fit, truth):
     assert fit.converged
     post = fit.idata["posterior"].to_dataset()
-    truth = {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]}
     check_coverage([(name, post[name].values, value) for name, value in truth.items()])
+    return post
+
+
+def test_recovery_without_vibration():
+    """The paper's own fit (Fig. 2): the 42 rows without vibration determine all five parameters."""
+    ds = skinfit.load_dataset("ultrasonic_synthetic")
+    fit = skinfit.fit("ultrasonic", ds.subset(ds.frame["amplitude_pp"].to_numpy() == 0, "no vibration"), rng=1)
+    _check(fit, {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]})
+
+
+@pytest.mark.slow
+def test_recovery_on_the_shipped_dataset():
+    """All 252 rows (measured: 583 s wall on 2 loaded cores, min bulk ESS 2788, max R-hat 1.0064)."""
+    fit = skinfit.fit("ultrasonic", "ultrasonic_synthetic", rng=1)
+    truth = {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]}
+    post = _check(fit, truth)
     # 252 rows pin the noise level to about +-9% (sd of its estimate ~ sigma/sqrt(2n))
-    assert post["sigma"].quantile(0.025) > 0.8 * truth["sigma"] and post["sigma"].quantile(0.975) < 1.2 * truth["sigma"]
+    assert 0.8 * truth["sigma"] < post["sigma"].quantile(0.025) and post["sigma"].quantile(0.975) < 1.2 * truth["sigma"]
+
+
+VARIANT_TRUTHS = {
+    # seed 004's Fig. 2 fit; only the period average differs from the shipped generator
+    "ultrasonic_projected": dict(mu_inf=1.86, mu_0=0.156, k_V=0.0048, q=0.0177, V0=0.068),
+    # eq. 1 peaks at 0.905*mu_plus at 3.26*V0: 2.0 at 65 mm/s, inside the design like Fig. 2's peak
+    "ultrasonic_constant_mu": dict(mu_plus=2.2, q=0.0177, V0=0.02),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(VARIANT_TRUTHS))
+def test_variant_recovery_on_the_shipped_design(name):
+    """Each variant fitted to data it generated on the shipped rows (noise sigma 0.1, seed 1)."""
+    ds = skinfit.load_dataset("ultrasonic_synthetic")
+    truth = VARIANT_TRUTHS[name]
+    y = skinfit.load_model(name).predict(truth, ds.frame)
+    y = y + np.random.default_rng(1).normal(0.0, CARD["noise"]["sigma"], len(ds))
+    fit = skinfit.fit(name, ds.with_observations({"friction_coefficient": y}, f"{name} truth"), rng=1)
+    _check(fit, {**truth, "sigma": CARD["noise"]["sigma"]})
