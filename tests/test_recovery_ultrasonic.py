@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import skinfit
+from skinfit import plots
 from recovery import check_coverage
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
@@ -84,11 +85,24 @@ def _check(fit, truth):
     return post
 
 
-def test_recovery_without_vibration():
-    """The paper's own fit (Fig. 2): the 42 rows without vibration determine all five parameters."""
+@pytest.fixture(scope="module")
+def still_fit():
     ds = skinfit.load_dataset("ultrasonic_synthetic")
-    fit = skinfit.fit("ultrasonic", ds.subset(ds.frame["amplitude_pp"].to_numpy() == 0, "no vibration"), rng=1)
-    _check(fit, {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]})
+    return skinfit.fit("ultrasonic", ds.subset(ds.frame["amplitude_pp"].to_numpy() == 0, "no vibration"), rng=1)
+
+
+def test_recovery_without_vibration(still_fit):
+    """The paper's own fit (Fig. 2): the 42 rows without vibration determine all five parameters."""
+    _check(still_fit, {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]})
+
+
+def test_ppc_plot_follows_the_card(still_fit, tmp_path):
+    """[plot] of the card: velocity on x in the CSV's mm/s, one panel per direction angle."""
+    fig = plots.plot_ppc(still_fit, tmp_path / "ppc.png")
+    assert (tmp_path / "ppc.png").stat().st_size > 5000
+    visible = [a for a in fig.axes if a.get_visible()]
+    assert {a.get_xlabel() for a in visible} == {"velocity [mm/s]"}
+    assert sorted(a.get_title() for a in visible) == ["direction angle = 0 deg", "direction angle = 90 deg"]
 
 
 @pytest.mark.slow
