@@ -107,7 +107,7 @@ def test_ppc_plot_follows_the_card(still_fit, tmp_path):
 
 @pytest.mark.slow
 def test_recovery_on_the_shipped_dataset():
-    """All 252 rows (measured: 583 s wall on 2 loaded cores, min bulk ESS 2788, max R-hat 1.0064)."""
+    """All 252 rows (measured: 269 s wall on 2 shared cores, min bulk ESS 2471, max R-hat 1.0050)."""
     fit = skinfit.fit("ultrasonic", "ultrasonic_synthetic", rng=1)
     truth = {**CARD["generating_parameters"], "sigma": CARD["noise"]["sigma"]}
     post = _check(fit, truth)
@@ -126,7 +126,9 @@ VARIANT_TRUTHS = {
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(VARIANT_TRUTHS))
 def test_variant_recovery_on_the_shipped_design(name):
-    """Each variant fitted to data it generated on the shipped rows (noise sigma 0.1, seed 1)."""
+    """Each variant fitted to data it generated on the shipped rows (noise sigma 0.1, seed 1).
+    Measured: projected 205 s, min bulk ESS 2870, max R-hat 1.0048; constant-mu 104 s, 2529,
+    1.0074; every truth inside its 95% interval."""
     ds = skinfit.load_dataset("ultrasonic_synthetic")
     truth = VARIANT_TRUTHS[name]
     y = skinfit.load_model(name).predict(truth, ds.frame)
