@@ -86,15 +86,25 @@ def _cmd_fit(args):
     if args.by:
         from .groups import fit_by
 
+        if args.resume:
+            raise InputError("--resume", "not supported with --by yet: resume each group's run directory")
+
         index = fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
                        split=split, noise=args.noise, progress=not args.quiet,
                        ess_target=args.ess, max_steps=args.max_steps)
         print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
         return 0 if index["converged"].all() or not args.strict else 3
+    from .checkpoint import CheckpointLock
+
     t0 = time.perf_counter()
-    result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
-                 noise=args.noise, progress=not args.quiet, strict=args.strict,
-                 ess_target=args.ess, max_steps=args.max_steps)
+    checkpoint = out / "checkpoint.h5"
+    if args.resume and not checkpoint.exists():
+        print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
+    with CheckpointLock(checkpoint):
+        result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
+                     noise=args.noise, progress=not args.quiet, strict=args.strict,
+                     ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
+                     resume=args.resume, checkpoint_every=args.checkpoint_every)
     path = result.save(out / "fit.nc")
     (out / "summary.csv").write_text(result.summary().to_csv())
     print(result.report_text())
@@ -143,6 +153,8 @@ def build_parser():
                         "one result per group under --out plus index.json")
     s.add_argument("--resume", action="store_true",
                    help="continue an interrupted fit from its checkpoint in --out")
+    s.add_argument("--checkpoint-every", type=float, default=30.0, metavar="SECONDS",
+                   help="seconds between checkpoints (OUT/checkpoint.h5) while sampling (default 30)")
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_fit)

@@ -43,7 +43,8 @@ def as_generator(rng):
 
 def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, constants=None,
         nwalkers=None, ess_target=400, max_steps=20000, progress=False, strict=False,
-        n_global=2000, n_local=4, n_prior_draws=2000, backend=None):
+        n_global=2000, n_local=4, n_prior_draws=2000, checkpoint=None, resume=False,
+        checkpoint_every=30.0):
     """Fit ``model`` to ``dataset``: MAP by nlopt, then emcee until converged.
 
     Parameters
@@ -64,6 +65,12 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         Minimum effective sample size per parameter to call the run converged.
     strict : bool
         Raise instead of warn when the run does not meet its convergence criteria.
+    checkpoint : path-like, optional
+        Checkpoint file written while sampling (every ``checkpoint_every`` seconds, at the end
+        and on KeyboardInterrupt); see :mod:`skinfit.checkpoint`.
+    resume : bool
+        Continue from ``checkpoint`` if it exists (MAP, walkers and random states restored:
+        the result equals an uninterrupted run's); InputError if it belongs to other inputs.
 
     Returns
     -------
@@ -77,13 +84,30 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     rng = as_generator(rng)
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
 
-    map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
-    z_map = post.to_z(map_result.theta[None])[0]
-    cov = laplace_covariance(post, z_map)
     nwalkers = nwalkers or max(32, 2 * ((4 * post.ndim + 1) // 2))
-    p0 = initial_ball(post, z_map, cov, nwalkers, rng)
+    ckpt, saved = None, None
+    if checkpoint is not None:
+        from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
+
+        settings = {"ess_target": ess_target, "max_steps": max_steps, "n_global": n_global,
+                    "n_local": n_local, "n_prior_draws": n_prior_draws}
+        ckpt = Checkpoint(checkpoint, run_identity(post, seed=seed, nwalkers=nwalkers, settings=settings),
+                          interval=checkpoint_every)
+        if resume and Path(checkpoint).exists():
+            saved = load_checkpoint(checkpoint)
+            saved.verify(ckpt.identity)
+    if saved is None:
+        map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
+        z_map = post.to_z(map_result.theta[None])[0]
+        cov = laplace_covariance(post, z_map)
+        p0 = initial_ball(post, z_map, cov, nwalkers, rng)
+    else:
+        map_result, p0 = map_from_record(saved.map), saved.p0
+        rng.bit_generator.state = saved.generator_state
+    if ckpt is not None:
+        ckpt.start(p0, rng.bit_generator.state, map_result)
     run = run_emcee(post, p0, rng, ess_target=ess_target, max_steps=max_steps, progress=progress,
-                    backend=backend)
+                    checkpoint=ckpt, resume=saved)
     if not run.converged:
         msg = f"{model.id} on {dataset.id}: not converged after {run.n_steps} steps: " + "; ".join(run.reasons)
         if strict:
@@ -318,6 +342,8 @@ class Fit:
         os.close(fd)
         try:
             self.idata.to_netcdf(tmp, engine="h5netcdf")
+            with open(tmp, "rb") as f:
+                os.fsync(f.fileno())
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):

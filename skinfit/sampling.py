@@ -25,7 +25,7 @@ from emcee.autocorr import auto_window
 
 from .moves import default_moves
 
-__all__ = ["SamplerRun", "run_emcee", "initial_ball"]
+__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points"]
 
 
 @dataclass(frozen=True)
@@ -66,31 +66,70 @@ def initial_ball(post, z0, cov, nwalkers, rng, max_tries=20):
 
 def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=50,
               burn_factor=2.0, max_steps=20000, check_every=200, moves=None, progress=False,
-              keep_total=4000, backend=None):
-    """Run emcee from walkers ``p0`` (nwalkers, d) until converged or ``max_steps``."""
+              keep_total=4000, checkpoint=None, resume=None):
+    """Run emcee from walkers ``p0`` (nwalkers, d) until converged or ``max_steps``.
+
+    Convergence is checked at step counts fixed by ``check_every`` and ``max_steps`` alone
+    (:func:`check_points`), never by wall time, and emcee's RandomState is seeded by one draw
+    from ``rng``: the chain is a pure function of (``p0``, ``rng`` state, settings).
+    ``checkpoint`` (a :class:`skinfit.checkpoint.Checkpoint`) is written when due, at the end
+    and on KeyboardInterrupt; ``resume`` (a :class:`skinfit.checkpoint.Saved`) continues a
+    checkpointed chain exactly where it stopped.
+    """
     t0 = time.perf_counter()
     nwalkers, d = p0.shape
     moves = moves if moves is not None else default_moves()
-    sampler = emcee.EnsembleSampler(nwalkers, d, post, vectorize=True, moves=moves, backend=backend)
     seed = int(rng.integers(2**32 - 1))
+    backend, spent = emcee.backends.Backend(), 0.0
     state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
+    if resume is not None and resume.iteration > 0:
+        backend.reset(nwalkers, d)
+        backend.grow(resume.iteration, None)
+        backend.chain[:], backend.log_prob[:] = resume.chain, resume.log_prob
+        backend.accepted[:] = resume.accepted
+        backend.iteration, backend.random_state = resume.iteration, resume.random_state
+        state = emcee.State(resume.chain[-1], log_prob=resume.log_prob[-1], random_state=resume.random_state)
+        spent = resume.seconds
+        post.counts.update(resume.counts)
+    sampler = emcee.EnsembleSampler(nwalkers, d, post, vectorize=True, moves=moves, backend=backend)
+    n = backend.iteration
+    counts = dict(post.counts)  # the counters as of the last completed step
+
+    def save():
+        if checkpoint is not None:
+            checkpoint.write(chain=backend.get_chain(), log_prob=backend.get_log_prob(),
+                             accepted=backend.accepted, random_state=backend.random_state or state.random_state,
+                             counts=counts, seconds=spent + time.perf_counter() - t0)
+
     bar = _progress_bar(progress, max_steps)
-    n, reasons = 0, ("not run",)
-    while n < max_steps:
-        steps = min(check_every, max_steps - n)
-        for state in sampler.sample(state, iterations=steps):
-            if bar is not None:
-                bar.update(1)
-        n += steps
-        chain = sampler.get_chain()
-        tau, burn, ess, rhat, reasons = _check(chain, ess_target, rhat_max, min_tau_multiple, burn_factor)
-        if bar is not None:
-            bar.set_postfix_str(f"tau={tau.max():.0f} ess={ess.min():.0f} rhat={rhat:.3f}")
-        if not reasons:
-            break
-        check_every = max(check_every, int(0.25 * n))  # geometric schedule: checks stay cheap
     if bar is not None:
-        bar.close()
+        bar.update(n)
+    reasons = ("not run",)
+    try:
+        for target in check_points(check_every, max_steps):
+            if target < n:
+                continue
+            if target > n:
+                for state in sampler.sample(state, iterations=target - n):
+                    counts = dict(post.counts)
+                    if bar is not None:
+                        bar.update(1)
+                    if checkpoint is not None and checkpoint.due():
+                        save()
+                n = target
+            tau, burn, ess, rhat, reasons = _check(sampler.get_chain(), ess_target, rhat_max,
+                                                   min_tau_multiple, burn_factor)
+            if bar is not None:
+                bar.set_postfix_str(f"tau={tau.max():.0f} ess={ess.min():.0f} rhat={rhat:.3f}")
+            if not reasons:
+                break
+    except KeyboardInterrupt:
+        save()
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    save()
     chain = sampler.get_chain()
     logp = sampler.get_log_prob()
     thin = max(1, int(np.ceil((chain.shape[0] - burn) * nwalkers / keep_total)))
@@ -98,7 +137,17 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     return SamplerRun(chain=kept, log_prob=logp[burn::thin].T, tau=tau, ess_emcee=ess, rhat_max=rhat,
                       acceptance=np.asarray(sampler.acceptance_fraction), n_steps=n, burn=burn,
                       thin=thin, converged=not reasons, reasons=tuple(reasons),
-                      seconds=time.perf_counter() - t0, evaluations=n * nwalkers)
+                      seconds=spent + time.perf_counter() - t0, evaluations=n * nwalkers)
+
+
+def check_points(check_every, max_steps):
+    """Step counts at which convergence is checked: every ``check_every`` steps, the interval
+    growing to a quarter of the chain length (cheap checks), the last at ``max_steps``."""
+    n = 0
+    while n < max_steps:
+        n = min(n + check_every, max_steps)
+        yield n
+        check_every = max(check_every, int(0.25 * n))
 
 
 def _check(chain, ess_target, rhat_max, min_tau_multiple, burn_factor):

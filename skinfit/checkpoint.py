@@ -1,0 +1,342 @@
+"""Checkpoints of a running fit: the chain so far and everything needed to continue it exactly.
+
+A checkpoint is data, never a pickle.  One HDF5 file (``skinfit fit --out RUN`` uses
+``RUN/checkpoint.h5``) holds
+
+* group ``chain``, in emcee's ``HDFBackend`` layout: datasets ``chain`` (n, nwalkers, d) in
+  sampling coordinates, ``log_prob`` (n, nwalkers), ``accepted`` (nwalkers,); attributes
+  ``iteration`` (= n), ``nwalkers``, ``ndim`` and ``random_state_0..4``, the state of emcee's
+  ``RandomState`` after step n.  ``emcee.backends.HDFBackend(path, name="chain",
+  read_only=True)`` reads it;
+* group ``skinfit``: what the chain belongs to (``meta``: ordered parameter names, sha256 of
+  the model card, prior file and dataset, noise/split/constants, seed, number of walkers,
+  sampler and optimiser settings), the MAP and the initial walkers ``p0``, the caller's numpy
+  Generator state (``bit_generator.state`` as JSON) when sampling began, the posterior's
+  evaluation counters and the sampling time so far.
+
+Every write replaces the whole file atomically (temporary file, fsync, rename, fsync of the
+directory), so a kill -9 or a power loss leaves the previous checkpoint or the new one, never
+a torn file.  :func:`skinfit.sampling.run_emcee` writes after the first step at which
+``interval`` seconds (default 30) have passed since the last write -- lengthened to 50x the
+last write's duration, so writing costs at most ~2% of the wall time -- and at the end of
+sampling or on KeyboardInterrupt.  (emcee's ``HDFBackend`` writes at every step instead.)
+
+A resumed fit (:func:`load_checkpoint` + :meth:`Saved.verify`) reuses the MAP, the walkers and
+the random states of the checkpoint, so its final chain equals that of an uninterrupted run
+with the same seed.  Resuming against a changed model card, prior file, dataset, parameter
+order or sampling setup is refused with an :class:`~skinfit.errors.InputError`.
+"""
+
+import json
+import os
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["FORMAT", "run_identity", "Checkpoint", "Saved", "load_checkpoint", "CheckpointLock",
+           "map_record", "map_from_record"]
+
+#: Version of the checkpoint layout; a checkpoint of another version is refused.
+FORMAT = 1
+
+
+def run_identity(post, *, seed, nwalkers, settings):
+    """What a chain belongs to: compared field by field before a resume.
+
+    ``post`` is the :class:`~skinfit.posterior.Posterior`; ``seed`` the integer seed (None
+    when the caller gave a Generator or no seed); ``settings`` the sampler and optimiser
+    settings (a JSON-able dict).
+    """
+    priors = post.priors
+    return {
+        "format": FORMAT,
+        "parameters": list(post.names),
+        "model_id": post.model.id, "model_sha256": post.model.sha256,
+        "priors_id": priors.id, "priors_sha256": priors.sha256,
+        "priors": {name: priors[name].describe() for name in priors},
+        "dataset_id": post.dataset.id, "dataset_sha256": post.dataset.sha256,
+        "setup": {"noise": dict(post.noise), "split": {p: list(c) for p, c in post.split.items()},
+                  "constants": {k: float(v) for k, v in post.constants.items()}},
+        "nwalkers": int(nwalkers),
+        "seed": None if seed is None else int(seed),
+        "settings": json.loads(json.dumps(settings)),
+    }
+
+
+def _short(digest):
+    return (digest or "none")[:12]
+
+
+def _differences(saved, now):
+    """Human-readable reasons why a checkpoint does not belong to the current run."""
+    out = []
+    if saved.get("format") != now["format"]:
+        return [f"checkpoint format {saved.get('format')!r} is not this skinfit's format {now['format']}"]
+    if saved["parameters"] != now["parameters"]:
+        if sorted(saved["parameters"]) == sorted(now["parameters"]):
+            out.append(f"parameter order differs: checkpoint has {saved['parameters']}, now {now['parameters']}")
+        else:
+            out.append(f"parameters differ: checkpoint has {saved['parameters']}, now {now['parameters']}")
+    for key, label in (("model", "model card"), ("priors", "prior file"), ("dataset", "dataset")):
+        a, b = saved[f"{key}_sha256"], now[f"{key}_sha256"]
+        if a != b or saved[f"{key}_id"] != now[f"{key}_id"]:
+            out.append(f"{label} changed ({saved[f'{key}_id']} sha256 {_short(a)}.. -> "
+                       f"{now[f'{key}_id']} sha256 {_short(b)}..)")
+    if saved["priors"] != now["priors"]:
+        changed = sorted(k for k in set(saved["priors"]) | set(now["priors"])
+                         if saved["priors"].get(k) != now["priors"].get(k))
+        out.append(f"priors changed for {', '.join(changed)}")
+    for key in ("noise", "split", "constants"):
+        if saved["setup"][key] != now["setup"][key]:
+            out.append(f"{key} differs: checkpoint {saved['setup'][key]}, now {now['setup'][key]}")
+    if saved["nwalkers"] != now["nwalkers"]:
+        out.append(f"number of walkers differs: checkpoint {saved['nwalkers']}, now {now['nwalkers']}")
+    if now["seed"] is not None and saved["seed"] != now["seed"]:
+        out.append(f"seed differs: checkpoint {saved['seed']}, now {now['seed']}")
+    for key in sorted(set(saved["settings"]) | set(now["settings"])):
+        if saved["settings"].get(key) != now["settings"].get(key):
+            out.append(f"setting {key} differs: checkpoint {saved['settings'].get(key)!r}, "
+                       f"now {now['settings'].get(key)!r}")
+    return out
+
+
+def map_record(result):
+    """A :class:`~skinfit.optimize.MAPResult` as JSON-able data (stored in the checkpoint)."""
+    return {"theta": [float(v) for v in result.theta], "log_density": float(result.log_density),
+            "starts": json.loads(json.dumps(list(result.starts), default=float)),
+            "evaluations": int(result.evaluations), "seconds": float(result.seconds)}
+
+
+def map_from_record(record):
+    """The :class:`~skinfit.optimize.MAPResult` stored by :func:`map_record` (theta bit for bit)."""
+    from .optimize import MAPResult
+
+    return MAPResult(theta=np.array(record["theta"], dtype=float), log_density=record["log_density"],
+                     starts=tuple(record["starts"]), evaluations=record["evaluations"],
+                     seconds=record["seconds"])
+
+
+# ---- JSON for numpy Generator states (PCG64 holds 128-bit ints; MT19937 holds arrays) ----------
+def _to_json(obj):
+    if isinstance(obj, dict):
+        return {k: _to_json(v) for k, v in obj.items()}
+    if isinstance(obj, np.ndarray):
+        return {"__ndarray__": obj.tolist(), "dtype": str(obj.dtype)}
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def _from_json(obj):
+    if isinstance(obj, dict):
+        if "__ndarray__" in obj:
+            return np.asarray(obj["__ndarray__"], dtype=obj["dtype"])
+        return {k: _from_json(v) for k, v in obj.items()}
+    return obj
+
+
+@dataclass(frozen=True)
+class Saved:
+    """A checkpoint read back from disk (see :func:`load_checkpoint`)."""
+
+    path: str
+    meta: dict
+    iteration: int
+    chain: np.ndarray  # (iteration, nwalkers, d), sampling coordinates
+    log_prob: np.ndarray  # (iteration, nwalkers)
+    accepted: np.ndarray  # (nwalkers,) accepted proposals per walker so far
+    random_state: tuple  # emcee's RandomState after step `iteration`
+    p0: np.ndarray  # (nwalkers, d) the initial walkers
+    generator_state: dict  # the caller's numpy Generator when sampling began
+    map: dict  # theta, log_density, starts, evaluations, seconds
+    counts: dict  # Posterior.counts at the time of the write
+    seconds: float  # sampling wall time so far
+
+    def verify(self, identity):
+        """Raise an InputError naming every difference between the checkpoint and ``identity``."""
+        diffs = _differences(self.meta, identity)
+        if diffs:
+            raise InputError(self.path, "cannot resume: " + "; ".join(diffs) + ". Resume with the same "
+                             "model card, priors, dataset and options, or delete the checkpoint to start afresh")
+
+
+def load_checkpoint(path):
+    """Read a checkpoint written by :class:`Checkpoint`; InputError if it is not one."""
+    path = Path(path)
+    try:
+        with h5py.File(path, "r") as f:
+            g, s = f["chain"], f["skinfit"]
+            n = int(g.attrs["iteration"])
+            rs = tuple(g.attrs[f"random_state_{i}"] for i in range(5))
+            rs = (str(rs[0]), np.asarray(rs[1], dtype=np.uint32), int(rs[2]), int(rs[3]), float(rs[4]))
+            return Saved(
+                path=str(path), meta=json.loads(s.attrs["meta"]), iteration=n,
+                chain=g["chain"][:n], log_prob=g["log_prob"][:n], accepted=g["accepted"][...],
+                random_state=rs, p0=s["p0"][...],
+                generator_state=_from_json(json.loads(s.attrs["generator_state"])),
+                map=json.loads(s.attrs["map"]), counts=json.loads(s.attrs["counts"]),
+                seconds=float(s.attrs["seconds"]))
+    except FileNotFoundError:
+        raise InputError(path, "no such checkpoint") from None
+    except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(path, f"not a readable skinfit checkpoint ({type(exc).__name__}: {exc}); "
+                         f"delete it to start afresh") from None
+
+
+class Checkpoint:
+    """Writes the checkpoint file of one run, atomically, when asked or when due.
+
+    Parameters
+    ----------
+    path : path-like
+        The checkpoint file (HDF5).
+    identity : dict
+        :func:`run_identity` of the run.
+    interval : float
+        Seconds between periodic writes; lengthened to 50x the last write's duration.
+    """
+
+    def __init__(self, path, identity, *, interval=30.0):
+        self.path = Path(path)
+        self.identity = identity
+        self.map_record = None
+        self.interval = float(interval)
+        self.p0 = None
+        self.generator_state = None
+        self.last_write = time.monotonic()
+        self.write_seconds = 0.0  # total time spent writing
+        self.writes = 0
+        self._last_duration = 0.0
+
+    def start(self, p0, generator_state, map_result):
+        """Record the initial walkers, the Generator state when sampling begins and the MAP."""
+        self.p0 = np.array(p0, dtype=float)
+        self.generator_state = generator_state
+        self.map_record = map_record(map_result)
+
+    def due(self):
+        """True when the (lengthened) interval has passed since the last write."""
+        return time.monotonic() - self.last_write >= max(self.interval, 50.0 * self._last_duration)
+
+    def write(self, *, chain, log_prob, accepted, random_state, counts, seconds):
+        """Replace the checkpoint file with the state after ``len(chain)`` steps."""
+        t0 = time.monotonic()
+        n, nwalkers, ndim = chain.shape if len(chain) else (0, *self.p0.shape)
+
+        def build(f):
+            g = f.create_group("chain")
+            g.attrs["version"] = _emcee_version()
+            g.attrs["nwalkers"] = nwalkers
+            g.attrs["ndim"] = ndim
+            g.attrs["has_blobs"] = False
+            g.attrs["iteration"] = n
+            g.create_dataset("accepted", data=np.asarray(accepted, dtype=float))
+            g.create_dataset("chain", data=np.asarray(chain, dtype=float).reshape(n, nwalkers, ndim),
+                             maxshape=(None, nwalkers, ndim), chunks=True)
+            g.create_dataset("log_prob", data=np.asarray(log_prob, dtype=float).reshape(n, nwalkers),
+                             maxshape=(None, nwalkers), chunks=True)
+            for i, v in enumerate(random_state):
+                g.attrs[f"random_state_{i}"] = v
+            s = f.create_group("skinfit")
+            s.attrs["meta"] = json.dumps(self.identity)
+            s.attrs["map"] = json.dumps(self.map_record)
+            s.attrs["generator_state"] = json.dumps(_to_json(self.generator_state))
+            s.attrs["counts"] = json.dumps({k: int(v) for k, v in counts.items()})
+            s.attrs["seconds"] = float(seconds)
+            s.attrs["written_unix"] = time.time()
+            s.create_dataset("p0", data=self.p0)
+
+        write_atomic(self.path, build)
+        self._last_duration = time.monotonic() - t0
+        self.write_seconds += self._last_duration
+        self.writes += 1
+        self.last_write = time.monotonic()
+
+
+def _emcee_version():
+    import emcee
+
+    return emcee.__version__
+
+
+def write_atomic(path, build):
+    """Create ``path`` as an HDF5 file filled by ``build(h5py.File)``: all or nothing.
+
+    Written to a temporary file in the same directory, flushed to disk, renamed over
+    ``path`` (atomic on POSIX), then the directory entry flushed.  An interruption at any
+    point leaves the previous file (or none) at ``path``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        with h5py.File(tmp, "w") as f:
+            build(f)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _fsync_dir(directory):
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:  # e.g. platforms without directory file descriptors
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+class CheckpointLock:
+    """An exclusive lock beside a checkpoint: two processes never run the same fit at once.
+
+    Uses ``fcntl.flock`` on ``.<name>.lock`` (released by the kernel if the process dies);
+    where ``fcntl`` is unavailable the lock is a no-op.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.lock_path = self.path.with_name(f".{self.path.name}.lock")
+        self._fd = None
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX
+            return self
+        self.lock_path.parent.mkdir(parents=True, exist_ok=True)
+        self._fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(self._fd)
+            self._fd = None
+            raise InputError(self.path, "another skinfit process is running this fit (its lock "
+                             f"{self.lock_path.name} is held); wait for it or use another --out") from None
+        for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):  # left by a killed writer
+            stale.unlink(missing_ok=True)
+        return self
+
+    def __exit__(self, *exc):
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+            self.lock_path.unlink(missing_ok=True)
+        return False
