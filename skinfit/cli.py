@@ -102,14 +102,17 @@ def _cmd_fit(args):
         print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
     with CheckpointLock(checkpoint):
         result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
-                     noise=args.noise, progress=not args.quiet, strict=args.strict,
+                     noise=args.noise, progress=not args.quiet,
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
     path = result.save(out / "fit.nc")
     (out / "summary.csv").write_text(result.summary().to_csv())
     print(result.report_text())
     print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
-    return 0 if result.converged or not args.strict else 3
+    if args.strict and result.warnings:  # failed or warned (skinfit.guardrails): result kept, exit 3
+        print(f"skinfit: --strict: {len(result.warnings)} guard-rail problem(s), see above", file=sys.stderr)
+        return 3
+    return 0
 
 
 def _lazy(module, function):

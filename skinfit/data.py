@@ -148,7 +148,7 @@ def load_dataset(name):
     groups = tuple(require(doc, "groups", list, where, default=[]))
     by_name = {c.name: c for c in columns}
     for g in groups:
-        if g not in by_name:
+        if not isinstance(g, str) or g not in by_name:
             raise InputError(where, f"group column {g!r} is not declared under [columns]", field="groups")
     provenance = dict(require(doc, "provenance", dict, where))
     kind = require(provenance, "kind", str, where, field_prefix="provenance.")

@@ -24,6 +24,7 @@ from .models import Model, load_model
 from .optimize import find_map, laplace_covariance
 from .posterior import Posterior, _level_labels
 from .priors import PriorSet, load_priors
+from .guardrails import check_run
 from .sampling import initial_ball, run_emcee
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
@@ -115,6 +116,9 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         warnings.warn(msg, ConvergenceWarning, stacklevel=2)
     idata = _build_tree(post, run, map_result, rng, n_prior_draws,
                         seed=seed, seconds_total=time.perf_counter() - t_start)
+    for w in json.loads(idata.attrs["warnings"]):  # non-convergence was warned above
+        if w["check"] != "convergence":
+            warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
     return Fit(idata, posterior=post)
 
 
@@ -171,6 +175,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
         "timings": json.dumps({"map_s": map_result.seconds, "sampling_s": run.seconds, "total_s": seconds_total}),
         "support_counts": json.dumps(dict(post.counts), default=int),
         "support_condition": post.model.support,
+        "warnings": json.dumps(check_run(post, run)),
     }
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
@@ -256,6 +261,12 @@ class Fit:
         return self.attr("map")
 
     @property
+    def warnings(self):
+        """Guard-rail problems found when the fit ran (:mod:`skinfit.guardrails`): a list of dicts
+        ``check, status (FAIL | WARN), parameter, message``; empty for a clean fit."""
+        return json.loads(self.idata.attrs.get("warnings", "[]"))
+
+    @property
     def converged(self):
         return bool(self.attr("sampler")["converged"])
 
@@ -298,7 +309,9 @@ class Fit:
                     q, values = np.log(q), np.log(values)
                 c = 1.0 - float(np.var(values)) / float(np.var(q))
             contraction.append(c)
-            notes.append("mostly prior: the data barely determine it" if c < 0.5 else "")
+            notes.append("; ".join(["mostly prior: the data barely determine it"] * (c < 0.5)
+                                   + [f"ON A BOUND: {w['message']}" for w in self.warnings
+                                      if w["check"] == "bound" and w["parameter"] == name]))
         del prior_ds
         table["map"] = [self.map[n] for n in table.index]
         table["tau"] = [sampler["tau"][n] for n in table.index]
@@ -321,6 +334,7 @@ class Fit:
         c = self.attr("support_counts")
         lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.idata.attrs['dataset_sha256'][:12]})",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
+                 *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
                  f"acceptance mean {s['acceptance_mean']:.3f} (min {s['acceptance_min']:.3f})  "
                  f"max R-hat over walkers {s['rhat_max']:.4f}",

@@ -171,6 +171,10 @@ def fit_diagnostics(fit, summary=None):
     add("posterior mass on a prior bound", "; ".join(b.split(":")[0] for b in bounds) or "none",
         f"<= {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound", "WARN" if bounds else "ok",
         "mass on a bound: " + " | ".join(bounds) if bounds else None)
+    for w in fit.warnings:  # the fit's own guard rails (skinfit.guardrails), as stored in the file
+        if w["check"] != "convergence":  # already the first row
+            add(f"guard rail: {w['check']}" + (f" ({w['parameter']})" if w["parameter"] else ""),
+                "tripped", "see skinfit.guardrails", w["status"], w["message"])
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.idata.attrs.get("map_log_density", float("nan"))),
         f"best of {len(starts)} optimiser runs, final status {starts[-1]['status'] if starts else 'n/a'}", "info")

@@ -90,10 +90,12 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         backend.iteration, backend.random_state = resume.iteration, resume.random_state
         state = emcee.State(resume.chain[-1], log_prob=resume.log_prob[-1], random_state=resume.random_state)
         spent = resume.seconds
-        post.counts.update(resume.counts)
+        if hasattr(post, "counts"):
+            post.counts.update(resume.counts)
     sampler = emcee.EnsembleSampler(nwalkers, d, post, vectorize=True, moves=moves, backend=backend)
     n = backend.iteration
-    counts = dict(post.counts)  # the counters as of the last completed step
+    # the evaluation counters as of the last completed step (targets without them: none)
+    counts = dict(getattr(post, "counts", {}))
 
     def save():
         if checkpoint is not None:
@@ -111,7 +113,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
                 continue
             if target > n:
                 for state in sampler.sample(state, iterations=target - n):
-                    counts = dict(post.counts)
+                    counts = dict(getattr(post, "counts", {}))
                     if bar is not None:
                         bar.update(1)
                     if checkpoint is not None and checkpoint.due():
