@@ -6,6 +6,7 @@ evaluated as code).
 """
 
 import importlib
+import math
 import warnings
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -29,6 +30,7 @@ class Quantity:
     description: str = ""
     noise: str | None = None  # observables only
     optional: bool = False  # covariates only: NaN allowed by design
+    physical: tuple = (-math.inf, math.inf)  # parameters only: the range the physics allows
 
 
 def resolve_forward(ref, where="forward"):
@@ -174,7 +176,16 @@ def _quantities(doc, key, where, *, observable=False):
                 raise InputError(where, f"unknown noise model {noise!r} (expected one of "
                                  f"{', '.join(NOISE_MODELS)})", field=prefix + "noise")
         optional = require(item, "optional", bool, where, field_prefix=prefix, default=False)
-        out.append(Quantity(name, unit, desc, noise, optional))
+        physical = (-math.inf, math.inf)
+        if key == "parameters" and "physical" in item:
+            physical = require(item, "physical", list, where, field_prefix=prefix)
+            if (len(physical) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              and not math.isnan(v) for v in physical)
+                    or not physical[0] < physical[1]):
+                raise InputError(where, f"expected [lower, upper] numbers with lower < upper, inf allowed "
+                                 f"(got {physical!r})", field=prefix + "physical")
+            physical = (float(physical[0]), float(physical[1]))
+        out.append(Quantity(name, unit, desc, noise, optional, physical))
     names = [q.name for q in out]
     dup = {n for n in names if names.count(n) > 1}
     if dup:

@@ -33,6 +33,20 @@ def noise_parameter_names(observables, noise):
     return names
 
 
+def _check_physical(model, priors, noise_names):
+    """Refuse a prior whose bounds leave the range the physics allows: the model card's
+    ``physical = [lower, upper]`` of each parameter, and [0, inf] for noise scales and
+    Student-t degrees of freedom."""
+    ranges = {q.name: q.physical for q in model.parameters}
+    ranges.update({n: (0.0, math.inf) for n in noise_names})
+    for name, (lo, hi) in ranges.items():
+        prior = priors[name]
+        if prior.lower < lo or prior.upper > hi:
+            raise InputError(priors.path or "priors", f"bounds [{prior.lower:g}, {prior.upper:g}] leave the "
+                             f"physical range [{lo:g}, {hi:g}] of {name} declared by model {model.id!r} "
+                             f"(its card, [[parameters]] physical)", field=f"{name}.bounds")
+
+
 @dataclass(frozen=True)
 class Slot:
     """One sampled scalar: a parameter, or one level of a split parameter."""
@@ -142,6 +156,7 @@ class Posterior:
         if missing:
             raise InputError(priors.path or "priors", f"no prior for {', '.join(missing)} "
                              f"(model {model.id!r} needs priors for {', '.join(needed)})")
+        _check_physical(model, priors, self.noise_names)
         slots, self._param_index, self.levels = [], {}, {}
         for pname in needed:
             prior = priors[pname]

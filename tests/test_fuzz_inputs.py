@@ -291,3 +291,28 @@ def test_no_fit_starts_on_a_bad_data_file(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r"data\.csv: column 'tangential_force', row 1: expected a number"):
         skinfit.fit(MODEL, str(d))
     shutil.rmtree(d)
+
+
+@pytest.mark.parametrize("old, new, name, physical", [
+    ('dist = "lognormal"\nmedian = 40e3\nsigma = 0.6\nbounds = [2e3, 100e3]',
+     'dist = "normal"\nloc = 40e3\nscale = 20e3\nbounds = [-1e3, 100e3]', "E_star", r"\[0, inf\]"),
+    ('dist = "normal"\nloc = 0.5\nscale = 0.3\nbounds = [0.0, 2.0]',
+     'dist = "normal"\nloc = 0.5\nscale = 0.3\nbounds = [-0.5, 2.0]', "mu", r"\[0, inf\]"),
+    ('dist = "halfnormal"\nscale = 0.05\nbounds = [0.0, 1.0]',
+     'dist = "normal"\nloc = 0.0\nscale = 0.05\nbounds = [-1.0, 1.0]', "sigma", r"\[0, inf\]"),
+])
+def test_prior_outside_physical_range_refused_before_sampling(tmp_path, monkeypatch, old, new, name, physical):
+    """The card declares E_star, mu >= 0 (``physical = [0.0, inf]``); noise scales are >= 0."""
+    assert old in PRIOR_TEXT
+    path = _write(tmp_path, "p.toml", PRIOR_TEXT.replace(old, new))
+    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    with pytest.raises(InputError, match=rf"p\.toml: {name}\.bounds: .*leave the physical range {physical}"):
+        skinfit.fit(MODEL, DATASET, priors=str(path))
+
+
+@pytest.mark.parametrize("value", ["[1.0]", "[2.0, 1.0]", '["0", 1.0]', "[nan, 1.0]", "0.0"])
+def test_malformed_physical_range_in_model_card(tmp_path, value):
+    text = MODEL_TEXT.replace("physical = [0.0, inf]", f"physical = {value}", 1)
+    assert text != MODEL_TEXT
+    with pytest.raises(InputError, match=r"m\.toml: parameters\[\d\]\.physical: expected"):
+        load_model(_write(tmp_path, "m.toml", text))
