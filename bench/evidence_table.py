@@ -1,7 +1,7 @@
 """Evidence of every model family on its shipped dataset, by each of skinfit's three methods.
 
     skinfit demo --out runs/demo            # the fits (15: five families x model + variants)
-    python bench/evidence_table.py runs/demo [--nlive 200] [--repeats 5] [--jobs 2]
+    python bench/evidence_table.py runs/demo [--nlive 200] [--repeats 5] [--jobs 2] [--nested DATASET ...]
 
 For each saved fit: bridge sampling (``--repeats`` independent splits; the reported error is
 Gronau et al.'s relative-MSE error of one estimate, the spread is over the repeats), the
@@ -26,14 +26,23 @@ from skinfit import __version__
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def one(path, nlive, repeats):
-    """Rows (dataset, model, method, log Z, se, spread, seconds) for the fit at ``path``."""
+def one(path, nlive, repeats, nested):
+    """Rows (dataset, model, method, log Z, se, spread, seconds, evaluations or refusal) for the
+    fit at ``path``; a method that refuses (e.g. Laplace with the mode on a bound) gets its reason."""
     warnings.simplefilter("ignore")
     fit = skinfit.load_fit(path)
     rows = []
-    for method, options in (("bridge", {"n_repeats": repeats}), ("laplace", {}), ("nested", {"nlive": nlive})):
+    methods = [("bridge", {"n_repeats": repeats}), ("laplace", {})]
+    if nested:
+        methods.append(("nested", {"nlive": nlive}))
+    for method, options in methods:
         t0 = time.perf_counter()
-        z = skinfit.evidence(fit, method=method, refresh=True, **options)
+        try:
+            z = skinfit.evidence(fit, method=method, refresh=True, **options)
+        except ValueError as err:
+            rows.append((fit.dataset_id, fit.model_id, method, np.nan, np.nan, np.nan,
+                         time.perf_counter() - t0, f"refused: {err}"))
+            continue
         wall = time.perf_counter() - t0
         spread = float(np.std(z.repeats, ddof=1)) if len(z.repeats) > 1 else float("nan")
         rows.append((fit.dataset_id, fit.model_id, method, z.log_z, z.se, spread, wall, z.n_evals))
@@ -46,12 +55,16 @@ def main(argv=None):
     p.add_argument("--nlive", type=int, default=200)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--jobs", type=int, default=os.cpu_count())
+    p.add_argument("--nested", nargs="*", metavar="DATASET",
+                   help="datasets whose fits also get dynesty (default: all; it takes minutes to an hour per fit)")
     args = p.parse_args(argv)
     paths = sorted(Path(args.runs).glob("*/*/fit.nc"))
     if not paths:
         raise SystemExit(f"no */*/fit.nc under {args.runs}: run `skinfit demo --out {args.runs}` first")
+    nested = [args.nested is None or p.parts[-3] in args.nested for p in paths]
     with ProcessPoolExecutor(args.jobs) as pool:
-        rows = [r for rs in pool.map(one, paths, [args.nlive] * len(paths), [args.repeats] * len(paths)) for r in rs]
+        rows = [r for rs in pool.map(one, paths, [args.nlive] * len(paths), [args.repeats] * len(paths), nested)
+                for r in rs]
     lines = [f"# Evidence per model family (issue 8)\n\nskinfit {__version__}, {platform.machine()}, "
              f"{os.cpu_count()} CPUs, {args.jobs} processes; `python bench/evidence_table.py {' '.join(argv or [])}` "
              f"on the fits of `skinfit demo`. log Z in nats, every constant of the likelihood and the "
@@ -63,8 +76,11 @@ def main(argv=None):
                   "|---|---|---|---|---|---|---|"]
         for d, m, method, lz, se, spread, wall, n in rows:
             if d == dataset:
-                lines.append(f"| {m} | {method} | {lz:.2f} | {se:.3f} | "
-                             f"{'' if np.isnan(spread) else f'{spread:.3f}'} | {wall:.1f} | {n} |")
+                if isinstance(n, str):
+                    lines.append(f"| {m} | {method} | - | - | - | {wall:.1f} | {n} |")
+                else:
+                    lines.append(f"| {m} | {method} | {lz:.2f} | {se:.3f} | "
+                                 f"{'' if np.isnan(spread) else f'{spread:.3f}'} | {wall:.1f} | {n} |")
     out = RESULTS / "evidence.md"
     out.write_text("\n".join(lines) + "\n")
     print(out.read_text())
