@@ -20,16 +20,15 @@ import pandas as pd
 
 from . import plots
 from .errors import InputError
+from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report"]
 
 #: Thresholds of the warnings at the top of a report.
 MIN_ACCEPTANCE_MEAN = 0.1
-MIN_ACCEPTANCE_WALKER = 0.05
+MIN_ACCEPTANCE_WALKER = STUCK_ACCEPTANCE
 MAX_OUTSIDE_SUPPORT = 0.05  # share of log-density evaluations
 MAX_RHAT = 1.05  # over walkers: a secondary check
-BOUND_WINDOW = 0.25  # posterior sds (sampling coordinate) from a prior bound ...
-BOUND_SHARE = 0.05  # ... holding more than this share of draws, and twice the prior's share
 
 _FIGURES = (
     ("ppc", plots.plot_ppc, "Posterior predictive: the data over the 50% and 90% posterior-predictive "
@@ -83,36 +82,6 @@ def _defang(text):
 
 
 # ---- diagnostics ----------------------------------------------------------------------------
-def _bound_issues(fit):
-    """Parameters whose posterior piles against a finite prior bound (sampling coordinate)."""
-    post = fit.idata["posterior"].to_dataset()
-    prior_ds = fit.idata["prior"].to_dataset() if "prior" in fit.idata.children else None
-    out = []
-    for s in plots._slots(fit):
-        prior = s["prior"]
-        if prior is None:
-            continue
-        log = prior.lower >= 0
-        z = plots._values(post, s).ravel()
-        zp = plots._values(prior_ds, s).ravel() if prior_ds is not None else prior.ppf((np.arange(4000) + 0.5) / 4000)
-        bounds = [("lower", prior.lower), ("upper", prior.upper)]
-        if log:
-            z, zp = np.log(z), np.log(zp)
-            bounds = [(side, math.log(b)) for side, b in bounds if b > 0 and math.isfinite(b)]
-        else:
-            bounds = [(side, b) for side, b in bounds if math.isfinite(b)]
-        width = BOUND_WINDOW * float(np.std(z))
-        for side, zb in bounds:
-            share = float(np.mean(np.abs(z - zb) <= width))
-            share_prior = float(np.mean(np.abs(zp - zb) <= width))
-            if share > BOUND_SHARE and share > 2 * share_prior:
-                value = math.exp(zb) if log else zb
-                out.append(f"{s['name']}: {share:.0%} of the posterior draws lie within {BOUND_WINDOW} sd of "
-                           f"the prior's {side} bound {value:g} (prior: {share_prior:.0%}); the bound, not the "
-                           f"data, limits it")
-    return out
-
-
 def fit_diagnostics(fit, summary=None):
     """Diagnostics of a saved fit as a table and the list of problems to show at the top.
 
@@ -167,12 +136,13 @@ def fit_diagnostics(fit, summary=None):
         "ok" if share < MAX_OUTSIDE_SUPPORT else "WARN",
         f"{c['outside_support']} of {n_eval} log-density evaluations ({share:.1%}) fell outside the physical "
         f"support ({condition}): the posterior presses against the model's limit")
-    bounds = _bound_issues(fit)
-    add("posterior mass on a prior bound", "; ".join(b.split(":")[0] for b in bounds) or "none",
-        f"<= {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound", "WARN" if bounds else "ok",
-        "mass on a bound: " + " | ".join(bounds) if bounds else None)
-    for w in fit.warnings:  # the fit's own guard rails (skinfit.guardrails), as stored in the file
-        if w["check"] != "convergence":  # already the first row
+    # the fit's own guard rails (skinfit.guardrails), as stored in the file; their messages are
+    # the issues, the bound row above them only summarises
+    bounds = [w["parameter"] for w in fit.warnings if w["check"] == "bound"]
+    add("posterior mass on a prior bound", "; ".join(bounds) or "none",
+        f"<= {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound", "WARN" if bounds else "ok")
+    for w in fit.warnings:
+        if w["check"] not in ("convergence", "acceptance"):  # already rows above
             add(f"guard rail: {w['check']}" + (f" ({w['parameter']})" if w["parameter"] else ""),
                 "tripped", "see skinfit.guardrails", w["status"], w["message"])
     starts = fit.attr("optimizer").get("starts", [])

@@ -143,8 +143,6 @@ def run_sbc(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_
     -------
     SBCResult
     """
-    from .fit import fit
-
     model = model if isinstance(model, Model) else load_model(model)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
     fit_priors = priors if fit_priors is None else (

@@ -3,7 +3,6 @@ the summary, the report text, the saved file and the report's diagnostics; --str
 
 import json
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
