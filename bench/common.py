@@ -104,7 +104,7 @@ def machine_info():
             "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def fit_sequence(post, seed, n_global=2000, n_local=4, nwalkers=None):
+def fit_sequence(post, seed, n_global=2000, n_local=2, nwalkers=None):
     """The start :func:`skinfit.fit` uses, drawn from the same seed in the same order:
     (MAP result, walkers p0, emcee random state, rng)."""
     rng = np.random.default_rng(seed)

@@ -1,7 +1,5 @@
 """``skinfit.compare``: fits of the same data ranked by evidence, with Bayes factors and LOO."""
 
-import json
-import math
 import warnings
 from pathlib import Path
 

@@ -44,7 +44,7 @@ def as_generator(rng):
 
 def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, constants=None,
         nwalkers=None, ess_target=400, max_steps=20000, progress=False, strict=False,
-        n_global=2000, n_local=4, n_prior_draws=2000, checkpoint=None, resume=False,
+        n_global=2000, n_local=2, n_prior_draws=2000, checkpoint=None, resume=False,
         checkpoint_every=30.0):
     """Fit ``model`` to ``dataset``: MAP by nlopt, then emcee until converged.
 
@@ -64,6 +64,10 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         ``normal`` (default), ``student_t`` or ``lognormal``.
     ess_target : float
         Minimum effective sample size per parameter to call the run converged.
+    n_global, n_local : int
+        MAP search: prior draws scored in one vectorised call, then BOBYQA from the ``n_local``
+        best of them and a polish (electroadhesion: 2 starts take 1.2-1.6 s and found the same
+        optimum as 3-4 starts, to 1e-4 nats, in 4 of 4 seeds).
     strict : bool
         Raise instead of warn when the run does not meet its convergence criteria.
     checkpoint : path-like, optional
@@ -408,7 +412,6 @@ def _priors_from_attrs(tree):
 
 def rebuild_posterior(tree):
     """Reconstruct the Posterior of a saved fit from its own records (cards as saved)."""
-    import tomllib
     from types import MappingProxyType
 
     from .data import Column

@@ -68,6 +68,8 @@ class Model:
     plot: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     shear: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     linear: tuple = ()  # parameters sampled in natural units although positive
+    shift: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))  # name -> function of constants
+    product: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))  # name -> {partner: exponent}
     derived: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
     path: str = ""
     sha256: str = ""
@@ -230,6 +232,7 @@ def _parse_model_text(text, where, digest):
             raise InputError(where, f"expected a number or {{value=..., unit=..., source=...}} "
                              f"(got {spec!r})", field=f"constants.{cname}")
         constants[cname] = value
+    sampling = require(doc, "sampling", dict, where, default={})
     model = Model(
         id=require(doc, "id", str, where),
         title=require(doc, "title", str, where),
@@ -244,10 +247,12 @@ def _parse_model_text(text, where, digest):
         support=require(doc, "support", str, where, default=""),
         split=MappingProxyType(dict(require(doc, "split", dict, where, default={}))),
         plot=MappingProxyType(dict(require(doc, "plot", dict, where, default={}))),
-        shear=MappingProxyType(dict(require(require(doc, "sampling", dict, where, default={}),
-                                            "shear", dict, where, field_prefix="sampling.", default={}))),
-        linear=tuple(require(require(doc, "sampling", dict, where, default={}), "linear", list, where,
-                             field_prefix="sampling.", default=[])),
+        shear=MappingProxyType(dict(require(sampling, "shear", dict, where, field_prefix="sampling.", default={}))),
+        linear=tuple(require(sampling, "linear", list, where, field_prefix="sampling.", default=[])),
+        shift=MappingProxyType(dict(require(sampling, "shift", dict, where, field_prefix="sampling.", default={}))),
+        product=MappingProxyType({k: MappingProxyType(dict(v)) if isinstance(v, dict) else v for k, v in
+                                  require(sampling, "product", dict, where, field_prefix="sampling.",
+                                          default={}).items()}),
         derived=_derived_table(doc, where),
         path=where,
         sha256=digest,
@@ -267,7 +272,38 @@ def _parse_model_text(text, where, digest):
             raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
                              f"(got {pname} = {ref!r})", field=f"sampling.shear.{pname}")
         resolve_forward(ref, where)
+    for pname, ref in model.shift.items():
+        if pname not in model.parameter_names or not isinstance(ref, str):
+            raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
+                             f"(got {pname} = {ref!r})", field=f"sampling.shift.{pname}")
+        resolve_forward(ref, where)
+    _check_products(model, where)
+    declared = [set(model.shear), set(model.shift), set(model.product), set(model.linear)]
+    for i, a in enumerate(declared):
+        for b in declared[i + 1:]:
+            if a & b:
+                raise InputError(where, f"{sorted(a & b)[0]!r} has two sampling coordinates: a parameter may "
+                                 f"be in at most one of shear, shift, product and linear", field="sampling")
     return model
+
+
+def _check_products(model, where):
+    """``[sampling.product]``: parameter = {partner = exponent, ...}; partners are other plain
+    parameters (not themselves products, sheared or shifted), exponents finite numbers."""
+    for pname, partners in model.product.items():
+        field = f"sampling.product.{pname}"
+        if pname not in model.parameter_names:
+            raise InputError(where, f"names unknown parameter {pname!r}", field=field)
+        if not isinstance(partners, MappingProxyType) or not partners:
+            raise InputError(where, f"expected {pname} = {{partner = exponent, ...}} (got {partners!r})", field=field)
+        special = set(model.product) | set(model.shear) | set(model.shift) | set(model.linear)
+        for partner, power in partners.items():
+            if partner not in model.parameter_names or partner in special:
+                raise InputError(where, f"partner {partner!r} must be another parameter sampled in plain log "
+                                 f"(not a product, sheared, shifted or linear one)", field=field)
+            if isinstance(power, bool) or not isinstance(power, (int, float)) or not math.isfinite(power):
+                raise InputError(where, f"exponent of {partner!r} must be a finite number (got {power!r})",
+                                 field=field)
 
 
 def _derived_table(doc, where):

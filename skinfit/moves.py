@@ -14,12 +14,52 @@ negative control.
 """
 
 import numpy as np
+from emcee import moves
 from emcee.moves.red_blue import RedBlueMove
 
-__all__ = ["SnookerMove", "default_moves"]
+__all__ = ["SnookerMove", "DEMove", "default_moves"]
 
 
-class SnookerMove(RedBlueMove):
+class _VectorisedRedBlue(RedBlueMove):
+    """emcee's red-blue update with the accept step vectorised over the half-ensemble.
+
+    emcee 3.1.6 accepts walker by walker in a Python loop (one random draw each) and converts
+    the vectorised log-probabilities back to scalars one by one (checking for blobs): 0.2 ms a
+    step with 32 walkers, ~15% of a step on the electroadhesion posterior.  Same proposal, same
+    Metropolis-Hastings rule; for a vectorised log-probability without blobs (skinfit's).
+    """
+
+    def propose(self, model, state):
+        nwalkers, ndim = state.coords.shape
+        if nwalkers < 2 * ndim and not self.live_dangerously:
+            raise RuntimeError("It is unadvisable to use a red-blue move with fewer walkers than twice "
+                               "the number of dimensions.")
+        self.setup(state.coords)
+        accepted = np.zeros(nwalkers, dtype=bool)
+        inds = np.arange(nwalkers) % self.nsplits
+        if self.randomize_split:
+            model.random.shuffle(inds)
+        for split in range(self.nsplits):
+            members = np.flatnonzero(inds == split)
+            c = [state.coords[inds == j] for j in range(self.nsplits) if j != split]
+            q, factors = self.get_proposal(state.coords[members], c, model.random)
+            if not np.isfinite(q).all():
+                raise ValueError("a proposal has a non-finite coordinate")
+            new = np.asarray(model.log_prob_fn(q), dtype=float).reshape(len(q))
+            if np.isnan(new).any():
+                raise ValueError("Probability function returned NaN")
+            ok = np.log(model.random.rand(len(q))) < factors + new - state.log_prob[members]
+            state.coords[members[ok]] = q[ok]
+            state.log_prob[members[ok]] = new[ok]
+            accepted[members] = ok
+        return state, accepted
+
+
+class DEMove(_VectorisedRedBlue, moves.DEMove):
+    """emcee's differential-evolution move (Ter Braak 2006; Nelson et al. 2013), vectorised accept."""
+
+
+class SnookerMove(_VectorisedRedBlue):
     """Differential-evolution snooker update (Ter Braak & Vrugt 2008), vectorised.
 
     Parameters
@@ -30,15 +70,13 @@ class SnookerMove(RedBlueMove):
 
     def __init__(self, gamma=1.7, **kwargs):
         self.gamma = gamma
-        kwargs["nsplits"] = 4
         super().__init__(**kwargs)
 
     def get_proposal(self, s, c, random):
+        c = np.concatenate(c, axis=0)  # the complementary walkers (the other half)
         ns, ndim = s.shape
-        picks = np.stack([cj[random.randint(len(cj), size=ns)] for cj in c], axis=1)  # (ns, 3, d)
-        order = np.argsort(random.rand(ns, 3), axis=1)  # random roles per walker
-        picks = np.take_along_axis(picks, order[:, :, None], axis=1)
-        z, z1, z2 = picks[:, 0], picks[:, 1], picks[:, 2]
+        picks = np.argsort(random.rand(ns, len(c)), axis=1)[:, :3]  # three distinct walkers each
+        z, z1, z2 = c[picks[:, 0]], c[picks[:, 1]], c[picks[:, 2]]
         delta = s - z
         norm = np.sqrt(np.einsum("ij,ij->i", delta, delta))
         e = delta / norm[:, None]
@@ -49,7 +87,7 @@ class SnookerMove(RedBlueMove):
 
 
 def default_moves():
-    """The move mixture skinfit samples with (chosen by measurement, see sampling.py)."""
-    from emcee.moves import DEMove
-
-    return [(DEMove(), 0.8), (SnookerMove(), 0.2)]
+    """The move mixture skinfit samples with, chosen by measurement (see sampling.py): on the
+    shipped electroadhesion posterior, max autocorrelation time 35 steps with 10% snooker vs
+    39 with 20%; on a standard 8-D Gaussian, 26-28 steps either way."""
+    return [(DEMove(), 0.9), (SnookerMove(), 0.1)]

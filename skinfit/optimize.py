@@ -42,29 +42,31 @@ class MAPError(RuntimeError):
 
 
 class _Box:
-    """Map between the optimiser's unit box and the posterior's sampling coordinates z.
+    """Map between the optimiser's unit box and natural parameters.
 
-    The box spans each coordinate between the prior's quantiles 1e-9 and 1 - 1e-9 (the
-    bounds themselves when they are finite), so nlopt never leaves the prior's support.
+    Each parameter spans its prior's quantiles 1e-9 .. 1 - 1e-9 (its bounds where finite), in
+    log where the posterior samples it in log and that range is positive, else linearly: the
+    box does not depend on the sampler's joint reparameterisations (shears, products).
     """
 
     def __init__(self, post):
-        self.post = post
         u = np.array([[1e-9], [1 - 1e-9]]) * np.ones((1, post.ndim))
         theta = post.prior_transform(u)
         theta[0] = np.where(np.isfinite(post._lo) & (post._lo > 0), post._lo, theta[0])
         theta[1] = np.where(np.isfinite(post._hi), post._hi, theta[1])
-        zq = post.to_z(theta)
-        self.zlo, self.zhi = zq[0], zq[1]
+        self.log = np.array([s.transform != "identity" for s in post.slots]) & (theta[0] > 0)
+        self.lo, self.hi = self._coord(theta[0]), self._coord(theta[1])
 
-    def to_z(self, w):
-        return self.zlo + np.clip(w, 0.0, 1.0) * (self.zhi - self.zlo)
+    def _coord(self, theta):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.log, np.log(np.where(self.log, theta, 1.0)), theta)
 
-    def from_z(self, z):
-        return np.clip((z - self.zlo) / (self.zhi - self.zlo), 0.0, 1.0)
+    def from_theta(self, theta):
+        return np.clip((self._coord(theta) - self.lo) / (self.hi - self.lo), 0.0, 1.0)
 
     def theta(self, w):
-        return self.post.to_theta(self.to_z(np.atleast_2d(w)))
+        x = self.lo + np.clip(np.atleast_2d(w), 0.0, 1.0) * (self.hi - self.lo)
+        return np.where(self.log, np.exp(x), x)
 
 
 def find_map(post, rng, *, n_global=2000, n_local=3, maxeval=3000, xtol_rel=1e-7):
@@ -80,7 +82,7 @@ def find_map(post, rng, *, n_global=2000, n_local=3, maxeval=3000, xtol_rel=1e-7
     lp = post.log_density(draws)
     evaluations = n_global
     order = np.argsort(-np.where(np.isfinite(lp), lp, -np.inf))[:n_local]
-    starts = [box.from_z(post.to_z(draws[i][None]))[0] for i in order if np.isfinite(lp[i])]
+    starts = [box.from_theta(draws[i]) for i in order if np.isfinite(lp[i])]
     count = [0]
 
     def objective(w, grad):
@@ -91,7 +93,7 @@ def find_map(post, rng, *, n_global=2000, n_local=3, maxeval=3000, xtol_rel=1e-7
     records, best_w, best = [], None, -np.inf
     for i, w0 in enumerate(starts):
         before = count[0]
-        w, value, code = _bobyqa(objective, w0, maxeval, xtol_rel, 0.05)
+        w, value, code = _bobyqa(objective, w0, maxeval, xtol_rel, 0.05, ftol_abs=1e-6)
         records.append({"start": i, "status": NLOPT_CODES.get(code, str(code)),
                         "log_density": value, "evaluations": count[0] - before})
         if value > best and value > _PENALTY / 2:
@@ -120,7 +122,7 @@ def find_map(post, rng, *, n_global=2000, n_local=3, maxeval=3000, xtol_rel=1e-7
     return result
 
 
-def _bobyqa(objective, w0, maxeval, xtol_rel, step):
+def _bobyqa(objective, w0, maxeval, xtol_rel, step, ftol_abs=1e-9):
     d = len(w0)
     opt = nlopt.opt(nlopt.LN_BOBYQA, d)
     opt.set_exceptions_enabled(False)
@@ -128,7 +130,7 @@ def _bobyqa(objective, w0, maxeval, xtol_rel, step):
     opt.set_upper_bounds(np.ones(d))
     opt.set_max_objective(objective)
     opt.set_xtol_rel(xtol_rel)
-    opt.set_ftol_abs(1e-9)
+    opt.set_ftol_abs(ftol_abs)
     opt.set_maxeval(maxeval)
     w0 = np.clip(w0, 1e-6, 1 - 1e-6)
     opt.set_initial_step(np.minimum(step, np.minimum(w0, 1 - w0) * 0.5 + 1e-9))

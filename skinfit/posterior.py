@@ -6,7 +6,7 @@ whole ensemble, and adds the noise log-likelihood and the normalised log-prior.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import special
@@ -55,7 +55,7 @@ class Slot:
     base: str  # parameter name, e.g. "alpha"
     level: str | None
     prior: object
-    transform: str  # "log" | "identity"
+    transform: str  # "log" | "identity" | "shift_log" | "product" (see Posterior._special_transforms)
     lo: float
     hi: float
 
@@ -175,74 +175,99 @@ class Posterior:
                 self._param_index[pname] = len(slots)
                 slots.append(Slot(pname, pname, None, prior, _transform_for(prior, pname in model.linear),
                                   prior.lower, prior.upper))
-        self.slots = tuple(slots)
-        self.names = tuple(s.name for s in slots)
-        self.ndim = len(slots)
-        self._lo = np.array([s.lo for s in slots])
-        self._hi = np.array([s.hi for s in slots])
-        self._log = np.array([s.transform == "log" for s in slots])
-        self._prior_groups = _prior_groups(slots)
-        self._shear = self._shear_plan(model)
+        self.slots = self._special_transforms(model, slots)
+        self.names = tuple(s.name for s in self.slots)
+        self.ndim = len(self.slots)
+        self._lo = np.array([s.lo for s in self.slots])
+        self._hi = np.array([s.hi for s in self.slots])
+        self._prior_groups = _prior_groups(self.slots)
+        self._log_norm = float(sum(s.prior._log_norm for s in self.slots))
         self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
 
     # ---- transforms ---------------------------------------------------------------------
-    def _shear_plan(self, model):
-        """(column, offset function) pairs for the card's ``[sampling.shear]`` declarations.
+    def _special_transforms(self, model, slots):
+        """Apply the card's ``[sampling]`` reparameterisations where they are valid.
 
-        A sheared parameter is sampled as ``log(theta) - offset(other parameters)``: a
-        triangular map with unit Jacobian.  Applied only to shared (not split) parameters
-        sampled in log, with offsets of shared parameters; otherwise the plain log is used.
+        ``shift``: a positive parameter sampled as ``log(theta + c)``, ``c`` a function of the
+        constants (a quantity the data see only through ``theta + c``, e.g. a layer stack).
+        ``product``: a positive parameter sampled as ``theta * prod(partner**power)`` in natural
+        units (a product the data pin down and that enters the prediction as a *sum*), partners
+        being shared log-sampled parameters.  ``shear``: a log-sampled parameter sampled as
+        ``log(theta) - offset(other parameters)``.  All three have a closed-form Jacobian
+        (:meth:`log_jacobian`).  Declarations whose conditions fail (a split parameter, a prior
+        reaching <= 0) fall back to the plain log/identity coordinate.
         """
-        plan = []
-        sheared = set(model.shear)
-        for pname, ref in model.shear.items():
-            j = self._param_index.get(pname)
-            if not isinstance(j, int) or not self._log[j]:
+        shared = {p: j for p, j in self._param_index.items() if isinstance(j, int)}
+        shift = np.zeros(len(slots))
+        for pname, ref in model.shift.items():
+            c = float(_resolve(ref)(self.constants))
+            for j, slot in enumerate(slots):
+                if slot.base == pname and slot.transform == "log" and c > 0 and slot.lo + c > 0:
+                    slots[j] = replace(slot, transform="shift_log")
+                    shift[j] = c
+        self._product = []
+        for pname, partners in model.product.items():
+            j = shared.get(pname)
+            cols = [shared.get(q) for q in partners]
+            if j is None or slots[j].transform != "log" or any(k is None or slots[k].transform != "log" for k in cols):
                 continue
-            plan.append((j, _resolve(ref), sheared))
-        return tuple(plan)
+            slots[j] = replace(slots[j], transform="product")
+            self._product.append((j, np.array(cols), np.array([float(v) for v in partners.values()])))
+        self._expo = np.array([s.transform == "log" for s in slots])
+        self._shifted = np.flatnonzero(shift)
+        self._shift = shift[self._shifted]  # theta = c*expm1(z - log c): exactly 0 at z = log c
+        self._log_shift = np.log(self._shift)
+        self._shear = tuple((j, _resolve(ref)) for pname, ref in model.shear.items()
+                            if (j := shared.get(pname)) is not None and slots[j].transform == "log")
+        self._sheared = {slots[j].base for j, _ in self._shear}
+        return tuple(slots)
 
-    def _offsets(self, z_plain):
-        """Offsets of the sheared columns, computed from the other (plain) coordinates."""
-        theta = None
-        out = []
-        for j, func, sheared in self._shear:
-            if theta is None:
-                with np.errstate(over="ignore"):
-                    theta = np.where(self._log, np.exp(z_plain), z_plain)
-            p = {name: theta[:, idx] for name, idx in self._param_index.items()
-                 if isinstance(idx, int) and name not in sheared}
-            out.append((j, func(p, self.constants)))
-        return out
+    def _shear_inputs(self, theta):
+        return {name: theta[:, idx] for name, idx in self._param_index.items()
+                if isinstance(idx, int) and name not in self._sheared}
 
-    def _to_plain(self, u):
-        """Sampled coordinates -> plain coordinates (log theta or theta)."""
-        if not self._shear:
-            return u
-        z = np.array(u, dtype=float, copy=True)
-        for j, off in self._offsets(z):
-            z[:, j] = u[:, j] + off
-        return z
+    def _transform(self, z):
+        """Natural parameters and log |d theta / d z| from sampled coordinates: ((k, d), (k,))."""
+        z = np.atleast_2d(np.asarray(z, dtype=float))
+        theta = z.copy()
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            theta[:, self._expo] = np.exp(z[:, self._expo])
+            theta[:, self._shifted] = self._shift * np.expm1(z[:, self._shifted] - self._log_shift)
+            log_jac = z[:, self._expo].sum(axis=1) + z[:, self._shifted].sum(axis=1)
+            for j, cols, powers in self._product:
+                log_partners = np.log(theta[:, cols]) @ powers
+                theta[:, j] = z[:, j] * np.exp(-log_partners)
+                log_jac = log_jac - log_partners
+            if self._shear:
+                p = self._shear_inputs(theta)
+                for j, func in self._shear:
+                    offset = func(p, self.constants)
+                    theta[:, j] = np.exp(z[:, j] + offset)
+                    log_jac = log_jac + offset
+        return theta, log_jac
 
     def to_theta(self, z):
         """Natural parameters (k, d) from sampled coordinates z (k, d)."""
-        z = self._to_plain(np.atleast_2d(np.asarray(z, dtype=float)))
-        with np.errstate(over="ignore"):
-            return np.where(self._log, np.exp(z), z)
+        return self._transform(z)[0]
 
     def to_z(self, theta):
+        """Sampled coordinates (k, d) of natural parameters (k, d)."""
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = np.where(self._log, np.log(theta), theta)
-        if self._shear:
-            for j, off in self._offsets(z):
-                z[:, j] = z[:, j] - off
+        z = theta.copy()
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            z[:, self._expo] = np.log(theta[:, self._expo])
+            z[:, self._shifted] = self._log_shift + np.log1p(theta[:, self._shifted] / self._shift)
+            for j, cols, powers in self._product:
+                z[:, j] = theta[:, j] * np.exp(np.log(theta[:, cols]) @ powers)
+            if self._shear:
+                p = self._shear_inputs(theta)
+                for j, func in self._shear:
+                    z[:, j] = np.log(theta[:, j]) - func(p, self.constants)
         return z
 
     def log_jacobian(self, z):
-        """log |d theta / d z| summed over coordinates, shape (k,) (shears have unit Jacobian)."""
-        z = self._to_plain(np.atleast_2d(np.asarray(z, dtype=float)))
-        return np.sum(np.where(self._log, z, 0.0), axis=-1)
+        """log |d theta / d z| of the sampling map, shape (k,)."""
+        return self._transform(z)[1]
 
     # ---- densities ----------------------------------------------------------------------
     def unpack(self, theta):
@@ -254,11 +279,11 @@ class Posterior:
     def log_prior(self, theta):
         """Normalised log prior, (k,): one vectorised closed form per distribution family."""
         theta = np.atleast_2d(theta)
-        inside = np.all((theta >= self._lo) & (theta <= self._hi), axis=1)
-        total = np.zeros(len(theta))
+        inside = ((theta >= self._lo) & (theta <= self._hi)).all(axis=1)
+        total = np.full(len(theta), -self._log_norm)
         with np.errstate(divide="ignore", invalid="ignore"):
-            for dist, cols, args, norm in self._prior_groups:
-                total += (_LOGPDF[dist](theta[:, cols], args, None, None) - norm).sum(axis=1)
+            for logpdf, cols, args in self._prior_groups:
+                total += logpdf(theta[:, cols], args, None, None).sum(axis=1)
         return np.where(inside, total, -np.inf)
 
     def _evaluate(self, theta, pointwise):
@@ -365,10 +390,9 @@ class Posterior:
 
     def __call__(self, z):
         """log posterior density of the sampled coordinates z (k, d), Jacobian included."""
-        plain = self._to_plain(np.atleast_2d(np.asarray(z, dtype=float)))
-        with np.errstate(over="ignore"):
-            theta = np.where(self._log, np.exp(plain), plain)
-        return self.log_density(theta) + np.sum(np.where(self._log, plain, 0.0), axis=-1)
+        theta, log_jac = self._transform(z)
+        density = self.log_density(theta)
+        return np.where(density == -np.inf, -np.inf, density + log_jac)
 
     # ---- helpers for optimisers and nested sampling --------------------------------------
     def prior_transform(self, u):
@@ -386,15 +410,18 @@ class Posterior:
 
 
 def _prior_groups(slots):
-    """Slots grouped by prior family: (dist, columns, argument arrays, normalising constants)."""
+    """Slots grouped by prior family: (log-density without its constant, columns, argument
+    arrays); uniform priors, constant inside their bounds, need no evaluation."""
     groups = {}
     for j, s in enumerate(slots):
         groups.setdefault(s.prior.dist, []).append(j)
     out = []
     for dist, cols in groups.items():
+        if dist == "uniform":
+            continue
         priors = [slots[j].prior for j in cols]
         args = {k: np.array([p.args[k] for p in priors]) for k in priors[0].args}
-        out.append((dist, np.array(cols), args, np.array([p._log_norm for p in priors])))
+        out.append((_LOGPDF[dist], np.array(cols), args))
     return tuple(out)
 
 

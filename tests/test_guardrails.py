@@ -146,5 +146,5 @@ def test_posterior_on_a_bound_is_warned_everywhere(runs):
 
 def test_library_fit_warns(bounded_priors):
     with pytest.warns(skinfit.ConvergenceWarning, match=r"d: \d+% of the posterior draws lie within 0.25 sd"):
-        skinfit.fit(MODEL, DATA, priors=skinfit.load_priors(bounded_priors), rng=4, max_steps=600,
+        skinfit.fit(MODEL, DATA, priors=skinfit.load_priors(bounded_priors), rng=4, max_steps=2000,
                     n_global=300)

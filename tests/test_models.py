@@ -70,3 +70,31 @@ def test_sampling_linear_keeps_natural_coordinates(tmp_path):
     bad.write_text(text.replace('linear = ["b", "d"]', 'linear = ["b", "e"]'))
     with pytest.raises(skinfit.InputError, match=r"sampling.linear: names unknown parameter 'e'"):
         skinfit.load_model(str(bad))
+
+
+def test_sampling_shift_and_product_declared_and_checked(tmp_path):
+    """The electroadhesion card samples d_air as log(d_air + eps_air*t0) and beta0 as the product
+    beta0*tau0*E*^(-2/3) in natural units; a split beta0 falls back to log; bad declarations are refused."""
+    from skinfit.posterior import Posterior
+
+    model, priors, data = (skinfit.load_model("electroadhesion"), skinfit.load_priors("electroadhesion"),
+                           skinfit.load_dataset("electroadhesion_synthetic"))
+    kinds = {s.name: s.transform for s in Posterior(model, priors, data).slots}
+    assert kinds == {"E_star": "log", "tau0": "log", "d_air": "shift_log", "beta0": "product", "phi": "log",
+                     "eta": "log", "alpha": "log", "sigma": "log"}
+    split = Posterior(model, priors, data, split={"beta0": "voltage"})
+    assert {s.transform for s in split.slots if s.base == "beta0"} == {"log"}
+    text = (ROOT / "models" / "electroadhesion.toml").read_text()
+    for old, new, message in [
+        ("tau0 = 1.0, E_star", "beta0 = 1.0, E_star", r"partner 'beta0' must be another parameter"),
+        ("tau0 = 1.0, E_star", "phi = 1.0, E_star", r"partner 'phi' must be another parameter"),
+        ("tau0 = 1.0, E_star", "tau0 = 'x', E_star", r"exponent of 'tau0' must be a finite number"),
+        ('d_air = "skinfit.physics.electroadhesion:air_gap_shift"',
+         'phi = "skinfit.physics.electroadhesion:air_gap_shift"', r"'phi' has two sampling coordinates"),
+        ('d_air = "skinfit.physics.electroadhesion:air_gap_shift"', 'd_air = "os:getcwd"', r"skinfit.physics"),
+    ]:
+        bad = tmp_path / "bad.toml"
+        assert old in text
+        bad.write_text(text.replace(old, new, 1))
+        with pytest.raises(skinfit.InputError, match=message):
+            skinfit.load_model(str(bad))

@@ -97,3 +97,18 @@ def test_predict_outside_support_warns_and_is_nan():
     with pytest.warns(skinfit.SupportWarning, match="outside the physical support"):
         y = model.predict({**TABLE_I, "alpha": 0.5}, data)
     assert np.isfinite(y[0]) and np.isnan(y[1])
+
+
+def test_forces_see_only_the_products_the_sampler_uses(rng):
+    """The two exact symmetries behind the card's [sampling.product] (models/electroadhesion.toml):
+    E* -> l*E*, tau0 -> l^(2/3)*tau0, eta -> l^(-2/3)*eta and tau0 -> m*tau0, beta0 -> beta0/m,
+    phi -> phi/m leave every force and the support unchanged (A0 ~ E*^(-2/3) in eq. 6)."""
+    x = {"normal_force": rng.uniform(0.2, 2.0, 50), "voltage": rng.choice([0.0, 50.0, 100.0, 150.0], 50)}
+    p = {k: np.array([[v]]) for k, v in TABLE_I.items()} | {"alpha": np.array([[0.45]])}
+    ft, ok = electroadhesion(p, x, C)
+    for lam, mu in [(3.0, 1.0), (1.0, 0.4), (0.2, 2.5)]:
+        q = dict(p, E_star=p["E_star"] * lam, tau0=p["tau0"] * lam ** (2 / 3) * mu, eta=p["eta"] * lam ** (-2 / 3),
+                 beta0=p["beta0"] / mu, phi=p["phi"] / mu)
+        ft2, ok2 = electroadhesion(q, x, C)
+        np.testing.assert_allclose(ft2["tangential_force"], ft["tangential_force"], rtol=1e-12)
+        assert np.array_equal(ok2, ok)

@@ -38,9 +38,14 @@ def test_hyper_truths_in_95_intervals_and_shrinkage_helps(thirteen):
     mse_separate = np.mean((np.log(subjects["separate"]) - truth) ** 2)
     mse_shrunk = np.mean((np.log(subjects["shrunk"]) - truth) ** 2)
     assert mse_shrunk < mse_separate
-    # shrinkage pulls every subject towards the population median, never past it
+    # shrinkage pulls every subject towards the population median, never past it beyond the
+    # Monte Carlo error of the medians (1.25 sd / sqrt(ESS); a subject whose separate median sits
+    # on the centre may land on either side of it)
     centre = table.loc["median", "estimate"]
-    assert np.all(np.abs(subjects["shrunk"] - centre) <= np.abs(subjects["separate"] - centre) + 1e-3)
+    sd = (subjects["shrunk_upper"] - subjects["shrunk_lower"]) / 3.92
+    mcse = 1.2533 * sd / np.sqrt(subjects["ess"])
+    assert np.all(np.abs(subjects["shrunk"] - centre) <= np.abs(subjects["separate"] - centre) + 3 * mcse)
+    assert np.sum(np.abs(subjects["shrunk"] - centre) < np.abs(subjects["separate"] - centre)) >= 10
     assert min(result.ess.values()) > 50
     tree = result.to_datatree()
     assert tree["posterior"]["theta"].shape[-2:] == (13, 1)

@@ -36,3 +36,17 @@ def test_log_jacobian_matches_numerical_determinant(post, rng):
 def test_call_equals_density_plus_jacobian(post, rng):
     z = post.to_z(post.sample_prior(20, rng))
     np.testing.assert_allclose(post(z), post.log_density(post.to_theta(z)) + post.log_jacobian(z), rtol=1e-12)
+
+
+def test_new_coordinates_are_finite_at_a_zero_bound_and_exact(rng):
+    """With uniform priors reaching 0 (the benchmark's), d_air = 0 and beta0 = 0 are inside the
+    prior: the shifted log of d_air is finite there, and the maps stay exact inverses."""
+    post = Posterior(skinfit.load_model("electroadhesion"), skinfit.load_priors("bench/priors_electroadhesion_uniform.toml"),
+                     skinfit.load_dataset("electroadhesion_synthetic"))
+    theta = post.sample_prior(40, rng)
+    theta[:10, post.names.index("d_air")] = 0.0
+    z = post.to_z(theta)
+    assert np.isfinite(z).all()
+    np.testing.assert_allclose(post.to_theta(z), theta, rtol=1e-12, atol=1e-300)
+    assert np.all(post.log_prior(post.to_theta(z)) > -np.inf)  # d_air = 0 stays inside the prior
+    np.testing.assert_allclose(post(z), post.log_density(theta) + post.log_jacobian(z), rtol=1e-12)
