@@ -50,3 +50,20 @@ def test_new_coordinates_are_finite_at_a_zero_bound_and_exact(rng):
     np.testing.assert_allclose(post.to_theta(z), theta, rtol=1e-12, atol=1e-300)
     assert np.all(post.log_prior(post.to_theta(z)) > -np.inf)  # d_air = 0 stays inside the prior
     np.testing.assert_allclose(post(z), post.log_density(theta) + post.log_jacobian(z), rtol=1e-12)
+
+
+def test_large_ensembles_are_evaluated_in_blocks_with_equal_results(rng):
+    """More than CHUNK parameter vectors are evaluated block by block (memory of quadrature
+    models); totals, pointwise values, predictions and validity equal one single call's."""
+    post = Posterior(skinfit.load_model("ultrasonic"), skinfit.load_priors("ultrasonic"),
+                     skinfit.load_dataset("ultrasonic_synthetic"))
+    theta = post.sample_prior(600, rng)
+    blocked = post.log_likelihood(theta), post.pointwise(theta)
+    single = Posterior(post.model, post.priors, post.dataset)
+    single.CHUNK = 10**6
+    np.testing.assert_array_equal(blocked[0], single.log_likelihood(theta))
+    ll, pred, valid = single.pointwise(theta)
+    for o in ll:
+        np.testing.assert_array_equal(blocked[1][0][o], ll[o])
+        np.testing.assert_array_equal(blocked[1][1][o], pred[o])
+    np.testing.assert_array_equal(blocked[1][2], valid)
