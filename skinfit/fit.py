@@ -66,7 +66,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         Minimum effective sample size per parameter to call the run converged.
     n_global, n_local : int
         MAP search: prior draws scored in one vectorised call, then BOBYQA from the ``n_local``
-        best of them and a polish (electroadhesion: 2 starts take 1.2-1.6 s and found the same
+        best of them and a polish (electroadhesion: 2 starts take 1.0-1.6 s and found the same
         optimum as 3-4 starts, to 1e-4 nats, in 4 of 4 seeds).
     strict : bool
         Raise instead of warn when the run does not meet its convergence criteria.

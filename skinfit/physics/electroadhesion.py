@@ -106,7 +106,7 @@ def air_gap_shift(c):
     The data see ``d_air`` only through the stack thickness ``t = t0 + d_air/eps_air``, which
     saturates at ``t0`` for ``d_air << eps_air*t0`` (~0.27 um): ``log(d_air)`` then has a long,
     flat left tail.  Sampling ``log(d_air + eps_air*t0) = log(eps_air*t)`` instead is linear in
-    ``log t`` and finite at ``d_air = 0`` (measured with ``beta0`` as a product: max
+    ``log t`` and finite at ``d_air = 0`` (together with ``beta0`` sampled as a product: max
     autocorrelation time 90 -> 37 steps on the shipped priors).
     """
     return c["eps_air"] * (c["d_sio2"] / c["eps_sio2"] + c["d_sc"] / c["eps_sc"])
