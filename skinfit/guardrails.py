@@ -78,7 +78,7 @@ def check_run(post, run):
     theta = post.to_theta(run.chain.reshape(-1, run.chain.shape[-1]))
     grid = (np.arange(4000) + 0.5) / 4000
     for j, s in enumerate(post.slots):
-        log = s.transform != "identity"  # log, shifted log, product: positive parameters
+        log = s.log_scale
         f = np.log if log else np.asarray
         for side, b in (("lower", s.lo), ("upper", s.hi)):
             if not math.isfinite(b) or (log and b <= 0):

@@ -267,16 +267,12 @@ def _parse_model_text(text, where, digest):
     for pname in model.linear:
         if pname not in model.parameter_names:
             raise InputError(where, f"names unknown parameter {pname!r}", field="sampling.linear")
-    for pname, ref in model.shear.items():
-        if pname not in model.parameter_names or not isinstance(ref, str):
-            raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
-                             f"(got {pname} = {ref!r})", field=f"sampling.shear.{pname}")
-        resolve_forward(ref, where)
-    for pname, ref in model.shift.items():
-        if pname not in model.parameter_names or not isinstance(ref, str):
-            raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
-                             f"(got {pname} = {ref!r})", field=f"sampling.shift.{pname}")
-        resolve_forward(ref, where)
+    for kind, table in (("shear", model.shear), ("shift", model.shift)):
+        for pname, ref in table.items():
+            if pname not in model.parameter_names or not isinstance(ref, str):
+                raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
+                                 f"(got {pname} = {ref!r})", field=f"sampling.{kind}.{pname}")
+            resolve_forward(ref, where)
     _check_products(model, where)
     declared = [set(model.shear), set(model.shift), set(model.product), set(model.linear)]
     for i, a in enumerate(declared):
@@ -290,13 +286,13 @@ def _parse_model_text(text, where, digest):
 def _check_products(model, where):
     """``[sampling.product]``: parameter = {partner = exponent, ...}; partners are other plain
     parameters (not themselves products, sheared or shifted), exponents finite numbers."""
+    special = set(model.product) | set(model.shear) | set(model.shift) | set(model.linear)
     for pname, partners in model.product.items():
         field = f"sampling.product.{pname}"
         if pname not in model.parameter_names:
             raise InputError(where, f"names unknown parameter {pname!r}", field=field)
         if not isinstance(partners, MappingProxyType) or not partners:
             raise InputError(where, f"expected {pname} = {{partner = exponent, ...}} (got {partners!r})", field=field)
-        special = set(model.product) | set(model.shear) | set(model.shift) | set(model.linear)
         for partner, power in partners.items():
             if partner not in model.parameter_names or partner in special:
                 raise InputError(where, f"partner {partner!r} must be another parameter sampled in plain log "

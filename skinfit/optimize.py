@@ -54,7 +54,7 @@ class _Box:
         theta = post.prior_transform(u)
         theta[0] = np.where(np.isfinite(post._lo) & (post._lo > 0), post._lo, theta[0])
         theta[1] = np.where(np.isfinite(post._hi), post._hi, theta[1])
-        self.log = np.array([s.transform != "identity" for s in post.slots]) & (theta[0] > 0)
+        self.log = np.array([s.log_scale for s in post.slots]) & (theta[0] > 0)
         self.lo, self.hi = self._coord(theta[0]), self._coord(theta[1])
 
     def _coord(self, theta):

@@ -59,6 +59,11 @@ class Slot:
     lo: float
     hi: float
 
+    @property
+    def log_scale(self):
+        """Sampled on a log scale (plain, shifted or as a product): a positive parameter."""
+        return self.transform != "identity"
+
 
 def _transform_for(prior, linear=False):
     """Sampling coordinate: log for non-negative parameters (products the data pin down become

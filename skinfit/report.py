@@ -26,7 +26,6 @@ __all__ = ["write_report", "fit_diagnostics", "cli_report"]
 
 #: Thresholds of the warnings at the top of a report.
 MIN_ACCEPTANCE_MEAN = 0.1
-MIN_ACCEPTANCE_WALKER = STUCK_ACCEPTANCE
 MAX_OUTSIDE_SUPPORT = 0.05  # share of log-density evaluations
 MAX_RHAT = 1.05  # over walkers: a secondary check
 
@@ -123,9 +122,9 @@ def fit_diagnostics(fit, summary=None):
     add("acceptance mean", acc, f">= {MIN_ACCEPTANCE_MEAN}", "ok" if acc >= MIN_ACCEPTANCE_MEAN else "WARN",
         None if acc >= MIN_ACCEPTANCE_MEAN else f"low acceptance: mean {acc:.3f} < {MIN_ACCEPTANCE_MEAN}")
     acc_min = float(s["acceptance_min"])
-    add("acceptance min (one walker)", acc_min, f">= {MIN_ACCEPTANCE_WALKER}",
-        "ok" if acc_min >= MIN_ACCEPTANCE_WALKER else "WARN",
-        None if acc_min >= MIN_ACCEPTANCE_WALKER else f"a walker accepted only {acc_min:.3f} of its moves (stuck?)")
+    add("acceptance min (one walker)", acc_min, f">= {STUCK_ACCEPTANCE}",
+        "ok" if acc_min >= STUCK_ACCEPTANCE else "WARN",
+        None if acc_min >= STUCK_ACCEPTANCE else f"a walker accepted only {acc_min:.3f} of its moves (stuck?)")
     n_eval = max(int(c["evaluations"]), 1)
     add("evaluations", int(c["evaluations"]), "", "info")
     add("evaluations outside the prior bounds", int(c["outside_prior"]), "rejected proposals", "info")
