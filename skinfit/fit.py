@@ -24,8 +24,9 @@ from .models import Model, load_model
 from .optimize import find_map, laplace_covariance
 from .posterior import Posterior, _level_labels
 from .priors import PriorSet, load_priors
+from .proposal import MixtureT
 from .guardrails import check_run
-from .sampling import initial_ball, run_emcee
+from .sampling import describe_moves, initial_ball, run_emcee
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
 
@@ -44,7 +45,7 @@ def as_generator(rng):
 
 def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, constants=None,
         nwalkers=None, ess_target=400, max_steps=20000, progress=False, strict=False,
-        n_global=2000, n_local=2, n_prior_draws=2000, checkpoint=None, resume=False,
+        n_global=2000, n_local=4, n_prior_draws=2000, checkpoint=None, resume=False,
         checkpoint_every=30.0):
     """Fit ``model`` to ``dataset``: MAP by nlopt, then emcee until converged.
 
@@ -103,16 +104,20 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
             saved.verify(ckpt.identity)
     if saved is None:
         map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
-        z_map = post.to_z(map_result.theta[None])[0]
-        cov = laplace_covariance(post, z_map)
+    else:
+        map_result = map_from_record(saved.map)
+    z_map = post.to_z(map_result.theta[None])[0]
+    cov = laplace_covariance(post, z_map)  # deterministic: recomputed on resume
+    if saved is None:
         p0 = initial_ball(post, z_map, cov, nwalkers, rng)
     else:
-        map_result, p0 = map_from_record(saved.map), saved.p0
+        p0 = saved.p0
         rng.bit_generator.state = saved.generator_state
     if ckpt is not None:
         ckpt.start(p0, rng.bit_generator.state, map_result)
     run = run_emcee(post, p0, rng, ess_target=ess_target, max_steps=max_steps, progress=progress,
-                    checkpoint=ckpt, resume=saved)
+                    checkpoint=ckpt, resume=saved, proposal=MixtureT([1.0], z_map[None], cov[None]),
+                    check_every=100, natural=post.to_theta)
     if not run.converged:
         msg = f"{model.id} on {dataset.id}: not converged after {run.n_steps} steps: " + "; ".join(run.reasons)
         if strict:
@@ -129,7 +134,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
 def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_total):
     nw, nd, d = run.chain.shape
     theta = post.to_theta(run.chain.reshape(-1, d))
-    ll, _, _ = post.pointwise(theta)
+    ll, pred, valid = post.pointwise(theta)
     lp_nat = post.log_prior(theta) + sum(v.sum(axis=1) for v in ll.values())
     t_prior = post.sample_prior(n_prior_draws, rng)
     posterior, prior_group, dims, coords = {}, {}, {}, {"obs_id": np.arange(post.n)}
@@ -144,7 +149,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
         else:
             posterior[pname] = theta[:, cols[0]].reshape(nw, nd)
             prior_group[pname] = t_prior[:, cols[0]].reshape(1, n_prior_draws)
-    ppc = {o: v.reshape(nw, nd, post.n) for o, v in post.simulate(theta, rng).items()}
+    ppc = {o: v.reshape(nw, nd, post.n) for o, v in post.simulate(theta, rng, (pred, valid)).items()}
     dims.update({o: ["obs_id"] for o in post.observables})
     loglik = {o: v.reshape(nw, nd, post.n) for o, v in ll.items()}
     constant = {c: np.asarray(v) for c, v in post.x.items()}
@@ -172,8 +177,9 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
         "optimizer": json.dumps({"starts": list(map_result.starts), "evaluations": map_result.evaluations}),
         "sampler": json.dumps({
             "nwalkers": nw, "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin,
-            "moves": "DEMove 0.8 + skinfit.moves.SnookerMove 0.2", "tau": dict(zip(post.names, run.tau.tolist())),
+            "moves": describe_moves(), "tau": dict(zip(post.names, run.tau.tolist())),
             "ess_emcee": dict(zip(post.names, run.ess_emcee.tolist())), "rhat_max": run.rhat_max,
+            "adaptation": list(run.adaptation),
             "acceptance_mean": float(run.acceptance.mean()), "acceptance_min": float(run.acceptance.min()),
             "converged": run.converged, "reasons": list(run.reasons), "evaluations": run.evaluations}),
         "timings": json.dumps({"map_s": map_result.seconds, "sampling_s": run.seconds, "total_s": seconds_total}),
@@ -203,8 +209,9 @@ def _derived_group(post, theta, nw, nd, dims, coords, attrs):
     levels = list(dict.fromkeys(labels))
     first = [labels.index(v) for v in levels]
     out = {}
-    for name, v in post.model.derive(post.unpack(theta), post.x, post.constants).items():
-        v = np.broadcast_to(v, (len(theta), post.n))[:, first]
+    params = {p: theta[:, j:j + 1] if isinstance(j, int) else theta[:, j[first]] for p, j in post._param_index.items()}
+    for name, v in post.model.derive(params, {c: x[first] for c, x in post.x.items()}, post.constants).items():
+        v = np.broadcast_to(v, (len(theta), len(first)))
         out[name] = v.reshape(nw, nd, len(levels)) if cols else v.reshape(nw, nd)
         if cols:
             dims[name] = [",".join(cols)]

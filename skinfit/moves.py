@@ -15,9 +15,10 @@ negative control.
 
 import numpy as np
 from emcee import moves
+from emcee.moves.move import Move
 from emcee.moves.red_blue import RedBlueMove
 
-__all__ = ["SnookerMove", "DEMove", "default_moves"]
+__all__ = ["SnookerMove", "DEMove", "IndependenceMove", "default_moves"]
 
 
 class _VectorisedRedBlue(RedBlueMove):
@@ -84,6 +85,34 @@ class SnookerMove(_VectorisedRedBlue):
         dq = q - z
         log_factor = (ndim - 1.0) * (0.5 * np.log(np.einsum("ij,ij->i", dq, dq)) - np.log(norm))
         return q, log_factor
+
+
+class IndependenceMove(Move):
+    """Independence Metropolis-Hastings: every walker proposes a fresh draw ``q`` of a fixed
+    density ``g`` (:class:`skinfit.proposal.MixtureT`) and accepts with probability
+    ``min(1, pi(q) g(x) / (pi(x) g(q)))``.  All walkers are proposed in one vectorised call.
+
+    ``g`` must not depend on the current walkers: the sampler replaces it only between runs of
+    steps (:func:`skinfit.sampling.run_emcee`), so each run of steps is a time-homogeneous
+    Markov chain that leaves the posterior invariant.
+    """
+
+    def __init__(self, proposal):
+        self.proposal = proposal
+
+    def propose(self, model, state):
+        nwalkers = len(state.coords)
+        q = self.proposal.draw(model.random, nwalkers)
+        new = np.asarray(model.log_prob_fn(q), dtype=float).reshape(nwalkers)
+        if np.isnan(new).any():
+            raise ValueError("Probability function returned NaN")
+        log_g = self.proposal.logpdf(np.concatenate([state.coords, q]))
+        log_ratio = new - state.log_prob + log_g[:nwalkers] - log_g[nwalkers:]
+        with np.errstate(invalid="ignore"):  # -inf - -inf: both outside the support, reject
+            ok = np.log(model.random.rand(nwalkers)) < log_ratio
+        state.coords[ok] = q[ok]
+        state.log_prob[ok] = new[ok]
+        return state, ok
 
 
 def default_moves():

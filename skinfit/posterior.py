@@ -182,6 +182,7 @@ class Posterior:
                 self._param_index[pname] = len(slots)
                 slots.append(Slot(pname, pname, None, prior, _transform_for(prior, pname in model.linear),
                                   prior.lower, prior.upper))
+        self._unique_rows()
         self.slots = self._special_transforms(model, slots)
         self.names = tuple(s.name for s in self.slots)
         self.ndim = len(self.slots)
@@ -190,6 +191,33 @@ class Posterior:
         self._prior_groups = _prior_groups(self.slots)
         self._log_norm = float(sum(s.prior._log_norm for s in self.slots))
         self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
+
+    def _unique_rows(self):
+        """Repeated measurements: the forward model runs once per distinct row (covariates and
+        levels of split parameters), and the normal / log-normal likelihood of a row group
+        needs only its count, mean and within-group sum of squares:
+        ``sum_i (y_i - mu)^2 = SS_within + n_u (ybar_u - mu)^2`` exactly (no cancellation).
+        On the shipped datasets: 216 -> 108 rows (electroadhesion), 456 -> 228 (textured),
+        1638 -> 42 (contact_area), 252 -> 84 (ultrasonic); wavy has none repeated."""
+        cols = [np.ascontiguousarray(v, dtype=float).view(np.int64) for v in self.x.values()]
+        cols += [np.asarray(j) for j in self._param_index.values() if not isinstance(j, int)]
+        keys = np.column_stack(cols) if cols else np.zeros((self.n, 1), dtype=np.int64)
+        _, first, inverse, counts = np.unique(keys, axis=0, return_index=True, return_inverse=True,
+                                              return_counts=True)
+        order = np.argsort(first)  # groups in order of first appearance
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        self._first, self._inverse = first[order], rank[inverse.reshape(-1)]
+        self._counts = counts[order].astype(float)
+        self.n_unique = len(self._first)
+        self._xu = {c: v[self._first] for c, v in self.x.items()}
+        self._param_index_u = {p: j if isinstance(j, int) else j[self._first] for p, j in self._param_index.items()}
+        self._zbar, self._ssw = {}, {}
+        for o in self.observables:
+            z = self._logy[o] if o in self._logy else self.y[o]
+            zbar = np.bincount(self._inverse, z, self.n_unique) / self._counts
+            self._zbar[o] = zbar
+            self._ssw[o] = np.bincount(self._inverse, (z - zbar[self._inverse]) ** 2, self.n_unique)
 
     # ---- transforms ---------------------------------------------------------------------
     def _special_transforms(self, model, slots):
@@ -301,50 +329,75 @@ class Posterior:
         """
         if len(theta) <= self.CHUNK:
             return self._evaluate_block(theta, pointwise)
-        blocks = [theta[i:i + self.CHUNK] for i in range(0, len(theta), self.CHUNK)]
-        parts = [self._evaluate_block(t, pointwise) for t in blocks]
-
-        def stack(j, full):
-            return {o: np.concatenate([np.broadcast_to(p[j][o], (len(t), self.n)) if full else p[j][o]
-                                       for p, t in zip(parts, blocks)]) for o in parts[0][j]}
-
-        return stack(0, pointwise), stack(1, True), np.concatenate([p[2] for p in parts])
+        ll, pred, valid = {}, {}, np.empty(len(theta), dtype=bool)
+        for i in range(0, len(theta), self.CHUNK):
+            part = self._evaluate_block(theta[i:i + self.CHUNK], pointwise)
+            for out, values in zip((ll, pred), part[:2]):
+                for o, v in values.items():
+                    if o not in out:
+                        out[o] = np.empty((len(theta),) + v.shape[1:])
+                    out[o][i:i + len(v)] = v
+            valid[i:i + self.CHUNK] = part[2]
+        return ll, pred, valid
 
     def _evaluate_block(self, theta, pointwise):
         """Forward model + noise log-likelihood: (ll, pred, valid).
 
         ``ll`` maps observable -> (k, n) pointwise values when ``pointwise``, else -> (k,)
-        totals (the sampling hot path: no per-point constants materialised).
+        totals (the sampling hot path: the forward model and the normal / log-normal
+        likelihood on distinct rows only, see :meth:`_unique_rows`); ``pred`` maps
+        observable -> (k, n) predictions.
         """
-        params = self.unpack(theta)
+        theta = np.atleast_2d(theta)
         k = len(theta)
-        pred, ok = self.model.forward(params, self.x, self.constants)
+        params = {p: theta[:, j:j + 1] if isinstance(j, int) else theta[:, j] for p, j in self._param_index_u.items()}
+        pred_u, ok = self.model.forward(params, self._xu, self.constants)
         ok = np.asarray(ok)
         valid = ok.all(axis=-1) if ok.ndim == 2 else np.full(k, bool(ok.all()) if ok.ndim else bool(ok))
         if ok.ndim == 2 and ok.shape[0] != k:
             valid = np.broadcast_to(valid, (k,))
-        ll = {}
+        ll, pred = {}, {}
         for o in self.observables:
             suffix = "" if len(self.observables) == 1 else f"_{o}"
-            sigma = params[f"sigma{suffix}"]
-            mu = pred[o]
-            if self.noise[o] == "lognormal":
+            mu_u = np.broadcast_to(pred_u[o], (k, self.n_unique))
+            pred[o] = mu_u[:, self._inverse]
+            noise = self.noise[o]
+            if noise != "student_t" and not pointwise:
+                sigma = params[f"sigma{suffix}"]
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    r = (self._logy[o] - np.log(mu)) / sigma
-                const = -np.log(sigma) - 0.5 * _LOG_2PI
-                ll[o] = (-0.5 * r * r + const - self._logy[o] if pointwise
-                         else -0.5 * (r * r).sum(axis=1) + self.n * const[:, 0] - self._sum_logy[o])
-            elif self.noise[o] == "student_t":
-                nu = params[f"nu{suffix}"]
-                r = (self.y[o] - mu) / sigma
-                lt = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
-                      - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))
-                ll[o] = np.broadcast_to(lt, (k, self.n)) if pointwise else np.broadcast_to(lt, (k, self.n)).sum(axis=1)
+                    m = np.log(mu_u) if noise == "lognormal" else mu_u
+                    d = self._zbar[o] - m
+                    ss = ((self._ssw[o] + self._counts * d * d) / (sigma * sigma)).sum(axis=1)
+                    log_sigma = (self.n * np.log(sigma[:, 0]) if sigma.shape[1] == 1
+                                 else (self._counts * np.log(sigma)).sum(axis=1))
+                ll[o] = -0.5 * ss - log_sigma - 0.5 * self.n * _LOG_2PI - self._sum_logy.get(o, 0.0)
             else:
-                r = (self.y[o] - mu) / sigma
-                const = -np.log(sigma) - 0.5 * _LOG_2PI
-                ll[o] = -0.5 * r * r + const if pointwise else -0.5 * (r * r).sum(axis=1) + self.n * const[:, 0]
-            ll[o] = np.where(valid[:, None] if pointwise else valid, ll[o], -np.inf)
+                sigma = theta[:, self._param_index[f"sigma{suffix}"]]
+                sigma = sigma[:, None] if sigma.ndim == 1 else sigma
+                mu = pred[o]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    if noise == "lognormal":
+                        r = np.log(mu)
+                        np.subtract(self._logy[o], r, out=r)
+                        offset = self._logy[o] + (np.log(sigma) + 0.5 * _LOG_2PI)
+                    else:
+                        r = self.y[o] - mu
+                        offset = np.log(sigma) + 0.5 * _LOG_2PI
+                    r /= sigma
+                    if noise == "student_t":
+                        nu = theta[:, self._param_index[f"nu{suffix}"]]
+                        nu = nu[:, None] if nu.ndim == 1 else nu
+                        value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
+                                 - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))
+                    else:
+                        value = r
+                        value *= value
+                        value *= -0.5
+                        value -= offset
+                value = np.broadcast_to(value, (k, self.n))
+                ll[o] = value if pointwise else value.sum(axis=1)
+            if not valid.all():
+                ll[o] = np.where(valid[:, None] if pointwise else valid, ll[o], -np.inf)
         return ll, pred, valid
 
     def pointwise(self, theta):
@@ -358,14 +411,16 @@ class Posterior:
         return ({o: np.broadcast_to(v, (k, self.n)) for o, v in ll.items()},
                 {o: np.broadcast_to(v, (k, self.n)) for o, v in pred.items()}, valid)
 
-    def simulate(self, theta, rng):
+    def simulate(self, theta, rng, predictions=None):
         """Simulated observations at each parameter vector: dict observable -> (k, n).
 
         The model's prediction plus a draw of its noise model (normal, Student-t, log-normal).
-        Rows of ``theta`` outside the physical support raise ``ValueError``.
+        ``predictions``: the (predictions, validity) :meth:`pointwise` returned for ``theta``,
+        to spare a second forward evaluation.  Rows of ``theta`` outside the physical support
+        raise ``ValueError``.
         """
         theta = np.atleast_2d(theta)
-        _, pred, valid = self._evaluate(theta, False)
+        _, pred, valid = (None, *predictions) if predictions is not None else self._evaluate(theta, False)
         if not np.all(valid):
             raise ValueError(f"{int((~valid).sum())} parameter vector(s) outside the physical support of "
                              f"{self.model.id}: {self.model.support}")

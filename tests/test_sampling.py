@@ -1,0 +1,142 @@
+"""The sampler: its autocorrelation estimate, the adaptive independence proposal (exact on a
+known target, refits replayed on resume), and walkers placed around a MAP on a bound."""
+
+import os
+from pathlib import Path
+
+import emcee
+import numpy as np
+import pytest
+
+import skinfit
+from skinfit.checkpoint import Checkpoint, load_checkpoint
+from skinfit.fit import as_generator
+from skinfit.optimize import MAPResult, find_map, laplace_covariance
+from skinfit.posterior import Posterior
+from skinfit.proposal import MixtureT
+from skinfit.sampling import ADAPT_FIRST, initial_ball, integrated_time, run_emcee
+
+BENCH_PRIORS = Path(__file__).parents[1] / "bench" / "priors_electroadhesion_uniform.toml"
+
+
+def _ar1(rng, n, walkers, rho, d=2):
+    """AR(1) chains, whose integrated autocorrelation time is (1 + rho) / (1 - rho)."""
+    x = np.empty((n, walkers, d))
+    x[0] = rng.normal(size=(walkers, d))
+    noise = rng.normal(size=(n, walkers, d)) * np.sqrt(1 - rho**2)
+    for t in range(1, n):
+        x[t] = rho * x[t - 1] + noise[t]
+    return x
+
+
+def test_integrated_time_agrees_with_emcee_and_the_closed_form(rng):
+    x = _ar1(rng, 4000, 32, rho=0.8)
+    ours = integrated_time(x)
+    np.testing.assert_allclose(ours, emcee.autocorr.integrated_time(x, tol=0), rtol=0.05)
+    np.testing.assert_allclose(ours, (1 + 0.8) / (1 - 0.8), rtol=0.1)
+
+
+def test_integrated_time_of_a_stuck_walker_is_long_not_nan(rng):
+    """A walker that never moves (an independence sampler rejecting for the whole window):
+    emcee's per-walker normalisation gives NaN; ours counts the walker's offset as correlation,
+    and a correlation that never decays within the chain as a long time (emcee's window
+    function returns the window 0, tau = 1, when no window satisfies Sokal's condition)."""
+    x = _ar1(rng, 400, 32, rho=0.5)
+    x[:, 7] = 3.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        assert np.isnan(emcee.autocorr.integrated_time(x, tol=0)).all()
+    tau = integrated_time(x)
+    assert np.all(np.isfinite(tau)) and np.all(tau > 2 * (1 + 0.5) / (1 - 0.5))
+    assert np.all(integrated_time(np.ones((100, 4, 2))) == np.inf)
+
+
+class _Gaussian:
+    """A correlated 4-D Gaussian target with the ``counts`` a Posterior keeps."""
+
+    def __init__(self, seed=0):
+        r = np.random.default_rng(seed)
+        a = r.normal(size=(4, 4))
+        self.cov = a @ a.T + 0.5 * np.eye(4)
+        self.prec = np.linalg.inv(self.cov)
+        self.mean = r.normal(size=4)
+        self.counts = {"evaluations": 0}
+
+    def __call__(self, x):
+        self.counts["evaluations"] += len(x)
+        r = x - self.mean
+        return -0.5 * np.einsum("ij,jk,ik->i", r, self.prec, r)
+
+
+def test_adaptive_run_is_exact_and_refits_on_schedule(rng):
+    """From a poor starting proposal (the wrong mean, no correlations) the refitted proposal
+    samples the target: moments within 5 Monte Carlo errors; refits at 100, 200, ... until
+    converged, and the kept chain starts after the last one."""
+    target = _Gaussian()
+    start = MixtureT([1.0], (target.mean + 2)[None], np.eye(4)[None])
+    p0 = target.mean + rng.normal(size=(32, 4))
+    run = run_emcee(target, p0, rng, proposal=start, ess_target=2000, check_every=100)
+    assert run.converged
+    steps = [a["step"] for a in run.adaptation]
+    assert steps[:2] == [ADAPT_FIRST, 2 * ADAPT_FIRST] and steps == [ADAPT_FIRST * 2**i for i in range(len(steps))]
+    last_refit = max(a["step"] for a in run.adaptation if a["refit"])
+    assert run.burn >= last_refit
+    flat = run.chain.reshape(-1, 4)
+    ess = run.ess_emcee.min() if len(flat) > run.ess_emcee.min() else len(flat)
+    sd = np.sqrt(np.diag(target.cov))
+    assert np.all(np.abs(flat.mean(axis=0) - target.mean) < 5 * sd / np.sqrt(ess))
+    assert np.all(np.abs(np.diag(np.cov(flat.T)) / np.diag(target.cov) - 1) < 5 * np.sqrt(2 / ess))
+    assert run.tau.max() < 10  # DE alone: ~20 on a 4-D Gaussian
+
+
+def test_resume_after_refits_replays_them_exactly():
+    """Interrupted after two refits, a resumed run recomputes the proposal from the saved chain
+    and continues the identical chain."""
+    post = Posterior(skinfit.load_model("electroadhesion_coulomb"), skinfit.load_priors("electroadhesion_coulomb"),
+                     skinfit.load_dataset("electroadhesion_synthetic"))
+
+    class Interrupting:
+        def __init__(self, stop_after):
+            self.left, self.counts = stop_after, post.counts
+
+        def __call__(self, z):
+            self.left -= 1
+            if self.left < 0:
+                raise KeyboardInterrupt
+            return post(z)
+
+    rng = as_generator(11)
+    theta = post.sample_prior(400, rng)
+    z0 = post.to_z(theta[np.argmax(post.log_density(theta))][None])[0]
+    proposal = MixtureT([1.0], z0[None], laplace_covariance(post, z0)[None])
+    z = initial_ball(post, z0, laplace_covariance(post, z0), 16, rng)
+    kw = dict(ess_target=1e9, max_steps=700, check_every=200, proposal=proposal)
+    state = rng.bit_generator.state
+    full = run_emcee(post, z, rng, **kw)
+    path = Path(os.environ.get("TMPDIR", "/tmp")) / f"skinfit-adapt-{os.getpid()}.h5"
+    ckpt = Checkpoint(path, {"format": 1}, interval=1e9)
+    rng.bit_generator.state = state
+    ckpt.start(z, state, MAPResult(np.zeros(3), 0.0, (), 0, 0.0))
+    with pytest.raises(KeyboardInterrupt):
+        run_emcee(Interrupting(400), z, rng, checkpoint=ckpt, **kw)  # 1-2 evaluations a step
+    saved = load_checkpoint(path)
+    path.unlink()
+    assert 2 * ADAPT_FIRST < saved.iteration < 4 * ADAPT_FIRST
+    rng = as_generator(0)  # any: the random states come from the checkpoint
+    rng.bit_generator.state = saved.generator_state
+    resumed = run_emcee(post, saved.p0, rng, resume=saved, **kw)
+    assert [a["step"] for a in resumed.adaptation] == [a["step"] for a in full.adaptation]
+    assert np.array_equal(resumed.chain, full.chain) and np.array_equal(resumed.log_prob, full.log_prob)
+
+
+def test_walkers_placed_around_a_map_in_a_corner_of_the_prior(rng):
+    """With uniform priors the electroadhesion MAP sits on two upper bounds (E_star, phi):
+    three quarters of any ball around it lie outside; every walker is still placed inside."""
+    post = Posterior(skinfit.load_model("electroadhesion"), skinfit.load_priors(str(BENCH_PRIORS)),
+                     skinfit.load_dataset("electroadhesion_synthetic"))
+    corner = find_map(post, np.random.default_rng(3), n_local=4).theta
+    assert corner[post.names.index("E_star")] == pytest.approx(post._hi[post.names.index("E_star")], rel=1e-9)
+    assert corner[post.names.index("phi")] == pytest.approx(post._hi[post.names.index("phi")], rel=1e-9)
+    z0 = post.to_z(corner[None])[0]
+    assert np.isfinite(post(z0[None]))[0]
+    p0 = initial_ball(post, z0, np.eye(post.ndim), 64, rng)
+    assert np.all(np.isfinite(post(p0))) and len(np.unique(p0, axis=0)) == 64
