@@ -70,3 +70,40 @@ def test_large_ensembles_are_evaluated_in_blocks_with_equal_results(rng):
         np.testing.assert_array_equal(blocked[1][0][o], ll[o])
         np.testing.assert_array_equal(blocked[1][1][o], pred[o])
     np.testing.assert_array_equal(blocked[1][2], valid)
+
+
+@pytest.mark.parametrize("noise", ["normal", "lognormal", "student_t"])
+def test_totals_over_repeated_rows_equal_the_row_by_row_sum(noise, rng):
+    """The sampling hot path evaluates the forward model once per distinct row and sums the
+    normal / log-normal likelihood from group counts, means and within-group sums of squares;
+    the total must equal scipy's log-density summed row by row.  contact_area: 13 subjects
+    pressed at the same 42 (force, actuation force) settings, two observables; with ``m0``
+    split by subject the groups must also separate the subjects (546 groups, not 42)."""
+    from types import MappingProxyType
+
+    from scipy import stats
+
+    from skinfit.priors import PriorSet, parse_prior
+
+    model = skinfit.load_model("contact_area")
+    ds = skinfit.load_dataset("contact_area_synthetic")
+    priors = skinfit.load_priors("contact_area")
+    nu = {f"nu_{o}": parse_prior(f"nu_{o}", {"dist": "gamma", "shape": 2, "scale": 10, "bounds": [1, 200],
+                                              "source": "test"}, "t") for o in ("contact_area", "impedance")}
+    priors = PriorSet("t", priors.model, MappingProxyType({**priors.priors, **nu}))
+    post = Posterior(model, priors, ds, noise=noise, split={"m0": "subject"})
+    assert (post.n, post.n_unique) == (1638, 546)
+    theta = post.sample_prior(30, rng)
+    p = post.unpack(theta)
+    pred, ok = model.forward(p, post.x, post.constants)  # row by row, no grouping
+    ref = 0.0
+    for o in post.observables:
+        mu, y, sigma = pred[o], post.y[o], p[f"sigma_{o}"]
+        ref = ref + {"normal": lambda: stats.norm.logpdf(y, mu, sigma),
+                     "student_t": lambda: stats.t.logpdf(y, p[f"nu_{o}"], mu, sigma),
+                     "lognormal": lambda: stats.lognorm.logpdf(y, sigma, scale=mu)}[noise]().sum(axis=1)
+    total = post.log_likelihood(theta)
+    valid = np.broadcast_to(ok, (len(theta), post.n)).all(axis=1)  # inside the physical support
+    assert valid.sum() >= 5 and np.isfinite(ref).all()
+    np.testing.assert_allclose(total[valid], ref[valid], rtol=1e-10)
+    assert np.all(total[~valid] == -np.inf)
