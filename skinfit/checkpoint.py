@@ -42,8 +42,9 @@ from .errors import InputError
 __all__ = ["FORMAT", "run_identity", "Checkpoint", "Saved", "load_checkpoint", "CheckpointLock",
            "map_record", "map_from_record"]
 
-#: Version of the checkpoint layout; a checkpoint of another version is refused.
-FORMAT = 1
+#: Version of the checkpoint layout and of the sampler that wrote it; a checkpoint of another
+#: version is refused (2: adaptive independence proposal, whose chain a format-1 run cannot continue).
+FORMAT = 2
 
 
 def run_identity(post, *, seed, nwalkers, settings):

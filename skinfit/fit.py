@@ -90,7 +90,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     rng = as_generator(rng)
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
 
-    nwalkers = nwalkers or max(32, 2 * ((4 * post.ndim + 1) // 2))
+    nwalkers = nwalkers or default_walkers(post)
     ckpt, saved = None, None
     if checkpoint is not None:
         from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
@@ -103,21 +103,16 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
             saved = load_checkpoint(checkpoint)
             saved.verify(ckpt.identity)
     if saved is None:
-        map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
+        map_result, proposal, p0 = start(post, rng, nwalkers=nwalkers, n_global=n_global, n_local=n_local)
     else:
-        map_result = map_from_record(saved.map)
-    z_map = post.to_z(map_result.theta[None])[0]
-    cov = laplace_covariance(post, z_map)  # deterministic: recomputed on resume
-    if saved is None:
-        p0 = initial_ball(post, z_map, cov, nwalkers, rng)
-    else:
+        map_result, proposal, p0 = start(post, rng, map_result=map_from_record(saved.map))
         p0 = saved.p0
         rng.bit_generator.state = saved.generator_state
     if ckpt is not None:
         ckpt.start(p0, rng.bit_generator.state, map_result)
     run = run_emcee(post, p0, rng, ess_target=ess_target, max_steps=max_steps, progress=progress,
-                    checkpoint=ckpt, resume=saved, proposal=MixtureT([1.0], z_map[None], cov[None]),
-                    check_every=100, natural=post.to_theta)
+                    checkpoint=ckpt, resume=saved, proposal=proposal, check_every=CHECK_EVERY,
+                    natural=post.to_theta)
     if not run.converged:
         msg = f"{model.id} on {dataset.id}: not converged after {run.n_steps} steps: " + "; ".join(run.reasons)
         if strict:
@@ -129,6 +124,32 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
     return Fit(idata, posterior=post)
+
+
+#: Steps between the first convergence checks of a fit (the interval grows to 10% of the chain).
+CHECK_EVERY = 100
+
+
+def start(post, rng, *, nwalkers=None, n_global=2000, n_local=4, map_result=None):
+    """Where :func:`fit` starts sampling: (MAP, initial proposal, walkers).
+
+    The MAP (:func:`~skinfit.optimize.find_map`, unless ``map_result`` is given), the Laplace
+    approximation there in sampling coordinates as the first independence proposal (a
+    Student-t, refitted during sampling), and ``nwalkers`` walkers drawn around the MAP
+    (None when ``nwalkers`` is None).  Draws from ``rng`` in this order: the MAP's prior
+    draws, then the walkers.
+    """
+    if map_result is None:
+        map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
+    z_map = post.to_z(map_result.theta[None])[0]
+    cov = laplace_covariance(post, z_map)  # deterministic: recomputed on resume
+    p0 = initial_ball(post, z_map, cov, nwalkers, rng) if nwalkers else None
+    return map_result, MixtureT([1.0], z_map[None], cov[None]), p0
+
+
+def default_walkers(post):
+    """Walkers of a fit: at least 32, and at least four per sampled dimension (even)."""
+    return max(32, 2 * ((4 * post.ndim + 1) // 2))
 
 
 def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_total):
