@@ -16,7 +16,9 @@ import numpy as np
 
 import skinfit
 from common import RESULTS, diagnostics, machine_info, machine_text, throughput
-from bench_electroadhesion import DATA, MODEL, PRIORS
+from bench_models import HERE
+
+MODEL, DATA, PRIORS = "electroadhesion", "electroadhesion_synthetic", HERE / "priors_electroadhesion_uniform.toml"
 from skinfit.data import Dataset
 from skinfit.posterior import Posterior
 

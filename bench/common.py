@@ -24,10 +24,10 @@ import emcee
 import numpy as np
 
 import skinfit
-from skinfit.moves import default_moves
-from skinfit.optimize import find_map, laplace_covariance
+from skinfit.fit import default_walkers, start
+from skinfit.moves import IndependenceMove
 from skinfit.posterior import Posterior
-from skinfit.sampling import initial_ball
+from skinfit.sampling import _adapt, adaptive_moves
 
 ESS_TARGET = 400
 RHAT_MAX = 1.01
@@ -104,16 +104,13 @@ def machine_info():
             "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def fit_sequence(post, seed, n_global=2000, n_local=2, nwalkers=None):
-    """The start :func:`skinfit.fit` uses, drawn from the same seed in the same order:
-    (MAP result, walkers p0, emcee random state, rng)."""
+def fit_start(post, seed):
+    """The start :func:`skinfit.fit` makes from ``seed``, drawn in the same order: (MAP result,
+    initial proposal, walkers p0, emcee's RandomState state)."""
     rng = np.random.default_rng(seed)
-    map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
-    z_map = post.to_z(map_result.theta[None])[0]
-    nwalkers = nwalkers or max(32, 2 * ((4 * post.ndim + 1) // 2))
-    p0 = initial_ball(post, z_map, laplace_covariance(post, z_map), nwalkers, rng)
-    state = np.random.RandomState(int(rng.integers(2**32 - 1))).get_state()
-    return map_result, p0, state, rng
+    map_result, proposal, p0 = start(post, rng, nwalkers=default_walkers(post))
+    emcee_seed = int(rng.integers(2**32 - 1))  # run_emcee's first draw
+    return map_result, proposal, p0, emcee_seed
 
 
 def run_skinfit(model, dataset, priors, seed):
@@ -125,36 +122,65 @@ def run_skinfit(model, dataset, priors, seed):
             fit = skinfit.fit(model, dataset, priors=priors, rng=seed)
         wall = time.perf_counter() - t0
     post = fit.idata["posterior"].to_dataset()
-    draws = np.stack([post[v].values for v in post.data_vars], axis=-1)
+    draws = np.stack([post[v].values.reshape(post.sizes["chain"], post.sizes["draw"], -1) for v in post.data_vars],
+                     axis=-1).reshape(post.sizes["chain"], post.sizes["draw"], -1)
     ess, rhat = diagnostics(draws)
     s, t = fit.attr("sampler"), fit.attr("timings")
     evals = fit.attr("support_counts")["evaluations"]
+    refits = [a["step"] for a in s.get("adaptation", []) if a["refit"]]
     note = (f"own criteria {'met' if s['converged'] else 'NOT met: ' + '; '.join(s['reasons'])}; "
-            f"{s['n_steps']} steps x {s['nwalkers']} walkers, max tau {max(s['tau'].values()):.0f}, "
-            f"MAP {t['map_s']:.1f} s, sampling {t['sampling_s']:.1f} s")
+            f"{s['n_steps']} steps x {s['nwalkers']} walkers, refits at {refits}, max tau {max(s['tau'].values()):.1f}, "
+            f"MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, result tree {t.get('tree_s', float('nan')):.2f} s")
     return Result("skinfit.fit", wall, ess, rhat, evals, mem.mb, note,
                   extra={"fit": fit, "timings": t, "sampler": s})
 
 
-def run_bare_emcee(post, seed, chunk=1000, max_steps=40000, burn_fraction=0.25, max_draws=1000):
-    """emcee over skinfit's own log-density ``post(z)``, same moves, walkers and start as
-    ``skinfit.fit`` (same seed, hence the same chain), run in chunks of ``chunk`` steps until
-    ArviZ's criteria hold on the chain after discarding ``burn_fraction`` of it (thinned to at
-    most ``max_draws`` per walker for the check)."""
+def run_bare_emcee(post, seed, sampler_record):
+    """The chain ``skinfit.fit`` ran, by emcee alone: ``emcee.EnsembleSampler(vectorize=True)``
+    over skinfit's own log-density ``post(z)``, from the same start (MAP, Laplace proposal,
+    walkers, seed), with skinfit's moves, refitting the proposal at the steps the fit's record
+    says (``skinfit.sampling._adapt``), to the fit's step count: the identical chain, hence the
+    same ESS, without skinfit's convergence checks, guard rails and result tree.  Returns the
+    wall time split into MAP + start and sampling; ESS/R-hat of the same kept draws as the fit's."""
     with PeakRSS() as mem:
         t0 = time.perf_counter()
-        map_result, p0, state, _ = fit_sequence(post, seed)
+        map_result, proposal, p0, emcee_seed = fit_start(post, seed)
+        t_start = time.perf_counter() - t0
+        move = IndependenceMove(proposal)
+        sampler = emcee.EnsembleSampler(len(p0), post.ndim, post, vectorize=True, moves=adaptive_moves(move))
+        state = emcee.State(p0, random_state=np.random.RandomState(emcee_seed).get_state())
+        refits = [a["step"] for a in sampler_record["adaptation"] if a["refit"]]
+        for stop in refits + [sampler_record["n_steps"]]:
+            state = sampler.run_mcmc(state, stop - sampler.iteration, progress=False, skip_initial_state_check=True)
+            if stop in refits:
+                move.proposal = _adapt(sampler.get_chain(), emcee_seed, proposal.nu)
+        wall = time.perf_counter() - t0
+    chain = sampler.get_chain()[sampler_record["burn"]::sampler_record["thin"]]
+    theta = post.to_theta(chain.reshape(-1, post.ndim)).reshape(chain.shape).transpose(1, 0, 2)
+    ess, rhat = diagnostics(theta)
+    note = (f"{sampler.iteration} steps x {len(p0)} walkers (the fit's), refits at {refits}; "
+            f"MAP and start {t_start:.2f} s, sampling {wall - t_start:.2f} s")
+    return Result("bare emcee loop, skinfit's moves (same chain)", wall, ess, rhat, post.counts["evaluations"],
+                  mem.mb, note, extra={"chain": sampler.get_chain(), "start_s": t_start})
+
+
+def run_plain_emcee(post, seed, chunk=1000, max_steps=40000, burn_fraction=0.25, max_draws=1000):
+    """What a hand-written emcee loop gets: differential-evolution moves (emcee's ``DEMove``)
+    over skinfit's log-density in its sampling coordinates (log for positive parameters), from
+    skinfit's MAP ball, in chunks of ``chunk`` steps until ArviZ's criteria hold on the chain
+    after discarding ``burn_fraction`` of it (thinned to at most ``max_draws`` per walker)."""
+    with PeakRSS() as mem:
+        t0 = time.perf_counter()
+        map_result, proposal, p0, emcee_seed = fit_start(post, seed)
         t_map = time.perf_counter() - t0
-        sampler = emcee.EnsembleSampler(len(p0), post.ndim, post, vectorize=True, moves=default_moves())
-        state = emcee.State(p0, random_state=state)
-        t_checks, marks = 0.0, [(0, t_map)]
+        sampler = emcee.EnsembleSampler(len(p0), post.ndim, post, vectorize=True, moves=emcee.moves.DEMove())
+        state = emcee.State(p0, random_state=np.random.RandomState(emcee_seed).get_state())
+        t_checks = 0.0
         while sampler.iteration < max_steps:
             state = sampler.run_mcmc(state, chunk, progress=False)
-            marks.append((sampler.iteration, time.perf_counter() - t0))
             tc = time.perf_counter()
             chain = sampler.get_chain()
-            n = chain.shape[0]
-            kept = chain[int(burn_fraction * n):]
+            kept = chain[int(burn_fraction * len(chain)):]
             kept = kept[::max(1, int(np.ceil(len(kept) / max_draws)))]
             theta = post.to_theta(kept.reshape(-1, post.ndim)).reshape(kept.shape).transpose(1, 0, 2)
             ess, rhat = diagnostics(theta)
@@ -162,18 +188,9 @@ def run_bare_emcee(post, seed, chunk=1000, max_steps=40000, burn_fraction=0.25, 
             if ess >= ESS_TARGET and rhat <= RHAT_MAX:
                 break
         wall = time.perf_counter() - t0
-    note = (f"{sampler.iteration} steps x {len(p0)} walkers (chunks of {chunk}); MAP {t_map:.1f} s, "
-            f"checks {t_checks:.1f} s")
-    return Result("bare emcee loop on skinfit's log-density", wall, ess, rhat, post.counts["evaluations"],
-                  mem.mb, note, extra={"chain": sampler.get_chain(), "steps": sampler.iteration,
-                                       "map_s": t_map, "checks_s": t_checks, "marks": marks})
-
-
-def wall_at_step(marks, n):
-    """Wall time [s] the bare loop had spent (MAP included, its checks excluded) when its chain
-    reached ``n`` steps, interpolated between chunk ends; None if it stopped earlier."""
-    steps, walls = np.array(marks, dtype=float).T
-    return float(np.interp(n, steps, walls)) if n <= steps[-1] else None
+    note = (f"{sampler.iteration} steps x {len(p0)} walkers (chunks of {chunk}); MAP {t_map:.2f} s, "
+            f"checks {t_checks:.2f} s")
+    return Result("plain emcee loop, DE moves", wall, ess, rhat, post.counts["evaluations"], mem.mb, note)
 
 
 def run_dynesty(post, seed, nlive=400, sample="rslice", maxcall=None):

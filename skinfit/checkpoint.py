@@ -10,7 +10,8 @@ A checkpoint is data, never a pickle.  One HDF5 file (``skinfit fit --out RUN`` 
   read_only=True)`` reads it;
 * group ``skinfit``: what the chain belongs to (``meta``: ordered parameter names, sha256 of
   the model card, prior file and dataset, noise/split/constants, seed, number of walkers,
-  sampler and optimiser settings), the MAP and the initial walkers ``p0``, the caller's numpy
+  sampler and optimiser settings), the MAP, the first independence proposal (JSON) and the
+  initial walkers ``p0``, the caller's numpy
   Generator state (``bit_generator.state`` as JSON) when sampling began, the posterior's
   evaluation counters and the sampling time so far.
 
@@ -156,6 +157,8 @@ class Saved:
     p0: np.ndarray  # (nwalkers, d) the initial walkers
     generator_state: dict  # the caller's numpy Generator when sampling began
     map: dict  # theta, log_density, starts, evaluations, seconds
+    proposal: dict  # the first independence proposal (MixtureT.to_dict)
+    importance: list  # the importance rounds that made it
     counts: dict  # Posterior.counts at the time of the write
     seconds: float  # sampling wall time so far
 
@@ -181,7 +184,8 @@ def load_checkpoint(path):
                 chain=g["chain"][:n], log_prob=g["log_prob"][:n], accepted=g["accepted"][...],
                 random_state=rs, p0=s["p0"][...],
                 generator_state=_from_json(json.loads(s.attrs["generator_state"])),
-                map=json.loads(s.attrs["map"]), counts=json.loads(s.attrs["counts"]),
+                map=json.loads(s.attrs["map"]), proposal=json.loads(s.attrs["proposal"]),
+                importance=json.loads(s.attrs["importance"]), counts=json.loads(s.attrs["counts"]),
                 seconds=float(s.attrs["seconds"]))
     except FileNotFoundError:
         raise InputError(path, "no such checkpoint") from None
@@ -215,11 +219,15 @@ class Checkpoint:
         self.writes = 0
         self._last_duration = 0.0
 
-    def start(self, p0, generator_state, map_result):
-        """Record the initial walkers, the Generator state when sampling begins and the MAP."""
+    def start(self, p0, generator_state, map_result, proposal, importance=()):
+        """Record the initial walkers, the Generator state when sampling begins, the MAP, the
+        first independence proposal (a :class:`~skinfit.proposal.MixtureT`) and the record of
+        the importance rounds that made it."""
         self.p0 = np.array(p0, dtype=float)
         self.generator_state = generator_state
         self.map_record = map_record(map_result)
+        self.proposal = proposal.to_dict()
+        self.importance = list(importance)
 
     def due(self):
         """True when the (lengthened) interval has passed since the last write."""
@@ -247,6 +255,8 @@ class Checkpoint:
             s = f.create_group("skinfit")
             s.attrs["meta"] = json.dumps(self.identity)
             s.attrs["map"] = json.dumps(self.map_record)
+            s.attrs["proposal"] = json.dumps(self.proposal)
+            s.attrs["importance"] = json.dumps(self.importance)
             s.attrs["generator_state"] = json.dumps(_to_json(self.generator_state))
             s.attrs["counts"] = json.dumps({k: int(v) for k, v in counts.items()})
             s.attrs["seconds"] = float(seconds)

@@ -26,7 +26,7 @@ from .posterior import Posterior, _level_labels
 from .priors import PriorSet, load_priors
 from .proposal import MixtureT
 from .guardrails import check_run
-from .sampling import describe_moves, initial_ball, run_emcee
+from .sampling import describe_moves, importance_start, initial_ball, run_emcee
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
 
@@ -103,13 +103,13 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
             saved = load_checkpoint(checkpoint)
             saved.verify(ckpt.identity)
     if saved is None:
-        map_result, proposal, p0 = start(post, rng, nwalkers=nwalkers, n_global=n_global, n_local=n_local)
+        map_result, proposal, p0, rounds = start(post, rng, nwalkers=nwalkers, n_global=n_global, n_local=n_local)
     else:
-        map_result, proposal, p0 = start(post, rng, map_result=map_from_record(saved.map))
-        p0 = saved.p0
+        map_result, proposal, p0 = map_from_record(saved.map), MixtureT.from_dict(saved.proposal), saved.p0
+        rounds = saved.importance
         rng.bit_generator.state = saved.generator_state
     if ckpt is not None:
-        ckpt.start(p0, rng.bit_generator.state, map_result)
+        ckpt.start(p0, rng.bit_generator.state, map_result, proposal, rounds)
     run = run_emcee(post, p0, rng, ess_target=ess_target, max_steps=max_steps, progress=progress,
                     checkpoint=ckpt, resume=saved, proposal=proposal, check_every=CHECK_EVERY,
                     natural=post.to_theta)
@@ -118,8 +118,11 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         if strict:
             raise RuntimeError(msg)
         warnings.warn(msg, ConvergenceWarning, stacklevel=2)
-    idata = _build_tree(post, run, map_result, rng, n_prior_draws,
-                        seed=seed, seconds_total=time.perf_counter() - t_start)
+    t_tree = time.perf_counter()
+    idata = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
+    now = time.perf_counter()
+    idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds, "sampling_s": run.seconds,
+                                         "tree_s": now - t_tree, "total_s": now - t_start})
     for w in json.loads(idata.attrs["warnings"]):  # non-convergence was warned above
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
@@ -130,21 +133,23 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
 CHECK_EVERY = 100
 
 
-def start(post, rng, *, nwalkers=None, n_global=2000, n_local=4, map_result=None):
-    """Where :func:`fit` starts sampling: (MAP, initial proposal, walkers).
+def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
+    """Where :func:`fit` starts sampling: (MAP, proposal, walkers, importance rounds).
 
-    The MAP (:func:`~skinfit.optimize.find_map`, unless ``map_result`` is given), the Laplace
-    approximation there in sampling coordinates as the first independence proposal (a
-    Student-t, refitted during sampling), and ``nwalkers`` walkers drawn around the MAP
-    (None when ``nwalkers`` is None).  Draws from ``rng`` in this order: the MAP's prior
-    draws, then the walkers.
+    The MAP (:func:`~skinfit.optimize.find_map`); the Laplace approximation there in sampling
+    coordinates as a Student-t, improved by importance sampling into the first independence
+    proposal, with ``nwalkers`` walkers drawn from the weighted draws
+    (:func:`~skinfit.sampling.importance_start`); when the importance weights are degenerate,
+    the Laplace proposal and walkers drawn around the MAP.  Draws from ``rng`` in this order:
+    the MAP's prior draws, the importance draws, then the walkers.
     """
-    if map_result is None:
-        map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
+    map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
     z_map = post.to_z(map_result.theta[None])[0]
-    cov = laplace_covariance(post, z_map)  # deterministic: recomputed on resume
-    p0 = initial_ball(post, z_map, cov, nwalkers, rng) if nwalkers else None
-    return map_result, MixtureT([1.0], z_map[None], cov[None]), p0
+    cov = laplace_covariance(post, z_map)
+    proposal, p0, rounds = importance_start(post, MixtureT([0.5, 0.5], [z_map, z_map], [cov, 4 * cov]), nwalkers, rng)
+    if p0 is None:
+        p0 = initial_ball(post, z_map, cov, nwalkers, rng)
+    return map_result, proposal, p0, rounds
 
 
 def default_walkers(post):
@@ -152,7 +157,7 @@ def default_walkers(post):
     return max(32, 2 * ((4 * post.ndim + 1) // 2))
 
 
-def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_total):
+def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=()):
     nw, nd, d = run.chain.shape
     theta = post.to_theta(run.chain.reshape(-1, d))
     ll, pred, valid = post.pointwise(theta)
@@ -200,10 +205,9 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, seconds_tota
             "nwalkers": nw, "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin,
             "moves": describe_moves(), "tau": dict(zip(post.names, run.tau.tolist())),
             "ess_emcee": dict(zip(post.names, run.ess_emcee.tolist())), "rhat_max": run.rhat_max,
-            "adaptation": list(run.adaptation),
+            "importance": list(importance), "adaptation": list(run.adaptation),
             "acceptance_mean": float(run.acceptance.mean()), "acceptance_min": float(run.acceptance.min()),
             "converged": run.converged, "reasons": list(run.reasons), "evaluations": run.evaluations}),
-        "timings": json.dumps({"map_s": map_result.seconds, "sampling_s": run.seconds, "total_s": seconds_total}),
         "support_counts": json.dumps(dict(post.counts), default=int),
         "support_condition": post.model.support,
         "warnings": json.dumps(check_run(post, run)),
@@ -369,8 +373,11 @@ class Fit:
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
                  f"acceptance mean {s['acceptance_mean']:.3f} (min {s['acceptance_min']:.3f})  "
-                 f"max R-hat over walkers {s['rhat_max']:.4f}",
-                 f"wall time: MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, total {t['total_s']:.2f} s",
+                 f"max R-hat {s['rhat_max']:.4f}",
+                 f"moves: {s['moves']}; proposal refitted at steps "
+                 f"{', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
+                 f"wall time: MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s"
+                 + (f", result tree {t['tree_s']:.2f} s" if "tree_s" in t else "") + f", total {t['total_s']:.2f} s",
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
                  + (f" ({self.idata.attrs.get('support_condition')})" if c["outside_support"] else ""),

@@ -434,7 +434,13 @@ class Posterior:
                 eps = rng.standard_t(np.broadcast_to(params[f"nu{suffix}"], mu.shape))
             else:
                 eps = rng.standard_normal(mu.shape)
-            out[o] = np.exp(np.log(mu) + sigma * eps) if self.noise[o] == "lognormal" else mu + sigma * eps
+            eps *= sigma  # in place: these are (draws, rows) arrays, 50 MB for contact_area
+            if self.noise[o] == "lognormal":
+                np.exp(eps, out=eps)
+                eps *= mu
+            else:
+                eps += mu
+            out[o] = eps
         return out
 
     def log_likelihood(self, theta):

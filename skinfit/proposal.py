@@ -16,7 +16,7 @@ import math
 import numpy as np
 from scipy.special import gammaln, logsumexp
 
-__all__ = ["MixtureT", "fit_mixture"]
+__all__ = ["MixtureT", "fit_mixture", "select_mixture"]
 
 
 class MixtureT:
@@ -34,7 +34,8 @@ class MixtureT:
     def __init__(self, weights, means, covs, nu=5.0):
         self.weights = np.asarray(weights, dtype=float)
         self.means = np.atleast_2d(np.asarray(means, dtype=float))
-        self.chol = np.linalg.cholesky(np.asarray(covs, dtype=float).reshape(-1, self.d, self.d))
+        self.covs = np.asarray(covs, dtype=float).reshape(-1, self.d, self.d)
+        self.chol = np.linalg.cholesky(self.covs)
         self.nu = float(nu)
         self._inv_chol = np.linalg.inv(self.chol)
         self._log_det = np.log(np.diagonal(self.chol, axis1=1, axis2=2)).sum(axis=1)
@@ -77,56 +78,70 @@ class MixtureT:
 
     def to_dict(self):
         return {"weights": self.weights.tolist(), "means": self.means.tolist(),
-                "covs": (self.chol @ np.swapaxes(self.chol, 1, 2)).tolist(), "nu": self.nu}
+                "covs": self.covs.tolist(), "nu": self.nu}
+
+    @classmethod
+    def from_dict(cls, record):
+        """The mixture :meth:`to_dict` described, bit for bit (JSON keeps float64 exactly)."""
+        return cls(record["weights"], record["means"], record["covs"], record["nu"])
 
 
-def fit_mixture(x, n_components, rng, *, nu=5.0, max_iter=40, tol=1e-3, min_weight=None, defensive=0.0,
-                widen=2.0):
-    """Fit a ``n_components`` Gaussian mixture to samples ``x`` (n, d) by EM and return it as
-    a :class:`MixtureT` with ``nu`` degrees of freedom (same means, weights, scale matrices).
+def fit_mixture(x, n_components, rng, *, weights=None, nu=5.0, max_iter=40, tol=1e-3, min_weight=None):
+    """Fit a ``n_components`` Gaussian mixture to samples ``x`` (n, d) by EM, each sample
+    counted with its ``weights`` (importance weights; default equal), and return it as a
+    :class:`MixtureT` with ``nu`` degrees of freedom (same means, weights, scale matrices).
 
     Starts from k-means++ seeds drawn with ``rng`` (deterministic for a given ``rng``);
     covariances are regularised by 1e-6 of the sample variances; components whose weight
     falls below ``min_weight`` (default ``1 / (10 K)``) are dropped.  With too few samples
-    for the components asked (fewer than 5 (d + 1) per component), fewer are fitted.
+    for the components asked (an effective sample size below 10 (d + 1) per component), fewer
+    are fitted.
     """
     x = np.asarray(x, dtype=float)
     n, d = x.shape
-    k = int(max(1, min(n_components, n // (5 * (d + 1)))))
+    w = np.full(n, 1.0 / n) if weights is None else np.asarray(weights, dtype=float) / np.sum(weights)
+    ess = 1.0 / np.sum(w * w)
+    k = int(max(1, min(n_components, ess // (10 * (d + 1)))))
     min_weight = 1.0 / (10 * k) if min_weight is None else min_weight
-    mean0, cov0 = x.mean(axis=0), np.atleast_2d(np.cov(x.T))
+    mean0 = w @ x
+    cov0 = np.atleast_2d(((x - mean0).T * w) @ (x - mean0)) / (1.0 - np.sum(w * w))
     ridge = 1e-6 * np.diag(np.diag(cov0)) + 1e-300 * np.eye(d)
     if k == 1:
         return MixtureT([1.0], mean0[None], (cov0 + ridge)[None], nu)
     # whitened k-means++ seeds
     white = np.linalg.solve(np.linalg.cholesky(cov0 + ridge), (x - mean0).T).T
-    seeds = [int(rng.integers(n))]
+    seeds = [int(rng.choice(n, p=w))]
     dist = np.sum((white - white[seeds[0]]) ** 2, axis=1)
     for _ in range(k - 1):
-        seeds.append(int(rng.choice(n, p=dist / dist.sum())) if dist.sum() > 0 else int(rng.integers(n)))
+        p = w * dist
+        seeds.append(int(rng.choice(n, p=p / p.sum())) if p.sum() > 0 else int(rng.choice(n, p=w)))
         dist = np.minimum(dist, np.sum((white - white[seeds[-1]]) ** 2, axis=1))
     means = x[seeds]
     covs = np.repeat((cov0 / k ** (2.0 / d) + ridge)[None], k, axis=0)
-    weights = np.full(k, 1.0 / k)
+    mix = np.full(k, 1.0 / k)
     last = -np.inf
     for _ in range(max_iter):
-        log_r = MixtureT(weights, means, covs, math.inf).component_log_densities(x)
+        log_r = MixtureT(mix, means, covs, math.inf).component_log_densities(x)
         norm = logsumexp(log_r, axis=1)
-        ll = float(norm.mean())
-        r = np.exp(log_r - norm[:, None])
+        ll = float(w @ norm)
+        r = np.exp(log_r - norm[:, None]) * w[:, None]
         nk = r.sum(axis=0)
-        keep = nk / n >= min_weight
+        keep = nk >= min_weight
         if not keep.all():
             r, nk = r[:, keep], nk[keep]
-        weights = nk / nk.sum()
+        mix = nk / nk.sum()
         means = (r.T @ x) / nk[:, None]
         covs = np.array([((x - m).T * rc) @ (x - m) for m, rc in zip(means, r.T)]) / nk[:, None, None] + ridge
         if abs(ll - last) < tol:
             break
         last = ll
-    if defensive > 0:
-        weights = np.append(weights * (1 - defensive), defensive)
-        means = np.vstack([means, mean0])
-        covs = np.concatenate([covs, (widen**2 * cov0 + ridge)[None]])
-    return MixtureT(weights, means, covs, nu)
+    return MixtureT(mix, means, covs, nu)
 
+
+def select_mixture(train, test, choices, rng, *, train_weights=None, test_weights=None, nu=5.0):
+    """The number of components among ``choices`` whose mixture, fitted to ``train``, gives
+    the (weighted) points ``test`` the highest mean log-density: a held-out estimate of the
+    cross-entropy to the distribution the points represent."""
+    tw = np.full(len(test), 1.0 / len(test)) if test_weights is None else test_weights / np.sum(test_weights)
+    scores = [float(tw @ fit_mixture(train, k, rng, weights=train_weights, nu=nu).logpdf(test)) for k in choices]
+    return choices[int(np.argmax(scores))]

@@ -26,17 +26,24 @@ import emcee
 import numpy as np
 
 from .moves import DEMove, IndependenceMove, default_moves
-from .proposal import fit_mixture
+from .proposal import fit_mixture, select_mixture
 
-__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "adaptive_moves", "describe_moves"]
+__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "adaptive_moves", "describe_moves", "importance_start"]
 
 #: First step at which the independence proposal is refitted to the chain; later refits at
 #: twice the previous step, for as long as the run has not converged.
 ADAPT_FIRST = 100
 #: No refit while the chain since the last one mixes this well (autocorrelation time, steps).
 TAU_KEEP = 10.0
-#: Mixture components of the refitted proposal.
-N_COMPONENTS = 6
+#: Importance sampling before the chain (:func:`importance_start`): draws per round, rounds,
+#: the effective sample size below which the weights are too degenerate to refit to, and the
+#: share of the draws above which the proposal is good enough.
+IMPORTANCE_SIZE = 2000
+IMPORTANCE_ROUNDS = 3
+IMPORTANCE_MIN_ESS = 50
+IMPORTANCE_GOOD = 0.5
+#: Mixture sizes a refit chooses among (by held-out likelihood).
+COMPONENT_CHOICES = (1, 3, 6)
 #: Share of steps that are independence moves (the rest: differential evolution).
 INDEPENDENCE_WEIGHT = 0.8
 
@@ -202,30 +209,85 @@ def adaptive_moves(indep):
 
 def _apply_refit(indep, chain, step, start, seed, nu, history, max_steps):
     """At ``step``, refit ``indep``'s proposal (:func:`_adapt`) unless the chain since the last
-    refit (``start``) already mixes well (from the third refit on: largest autocorrelation time
-    <= :data:`TAU_KEEP`, where another refit would only restart the count).  Records the
+    refit (``start``) already mixes well (largest autocorrelation time <= :data:`TAU_KEEP`,
+    where another refit would only restart the count).  Records the
     decision in ``history``; returns (start of the homogeneous chain, step of the next refit or
     None past ``max_steps``)."""
     following = 2 * step if 2 * step < max_steps else None
-    if step >= 4 * ADAPT_FIRST:
-        tau = integrated_time(chain[start + (step - start) // 4:step]).max()
-        if tau <= TAU_KEEP:
-            history.append({"step": step, "refit": False, "tau": float(tau)})
-            return start, following
+    tau = integrated_time(chain[start + (step - start) // 4:step]).max()
+    if tau <= TAU_KEEP:
+        history.append({"step": step, "refit": False, "tau": float(tau)})
+        return start, following
     indep.proposal = _adapt(chain[:step], seed, nu)
     history.append({"step": step, "refit": True, "components": len(indep.proposal.weights)})
     return step, following
 
 
 def _adapt(chain, seed, nu, max_samples=2000):
-    """The proposal refitted at step ``len(chain)``: a :data:`N_COMPONENTS` mixture fitted to the
-    second half of the chain (at most ``max_samples`` of its points).  Its random draws
-    (subsample, EM seeds) come from (``seed``, step) alone: a resumed run refits identically.
+    """The proposal refitted at step ``len(chain)``: a mixture fitted to the second half of the
+    chain (at most ``max_samples`` of its points), with the number of components among
+    :data:`COMPONENT_CHOICES` that predicts best (:func:`~skinfit.proposal.select_mixture`:
+    fitted on the even walkers, scored on the odd ones).  Its random draws (subsamples, EM
+    seeds) come from (``seed``, step) alone: a resumed run refits identically.
     """
     step = len(chain)
-    window = chain[step // 2:].reshape(-1, chain.shape[2])
+    d = chain.shape[2]
+    window = chain[step // 2:]
     rng = np.random.default_rng([seed, step])
-    return fit_mixture(_subsample(window, max_samples, rng), N_COMPONENTS, rng, nu=nu)
+    train = _subsample(window[:, 0::2].reshape(-1, d), max_samples // 2, rng)
+    test = _subsample(window[:, 1::2].reshape(-1, d), max_samples // 2, rng)
+    best = select_mixture(train, test, COMPONENT_CHOICES, rng, nu=nu)
+    return fit_mixture(_subsample(window.reshape(-1, d), max_samples, rng), best, rng, nu=nu)
+
+
+def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rounds=IMPORTANCE_ROUNDS):
+    """Adapt the proposal by importance sampling before any MCMC step, and start the walkers
+    from the weighted draws: population Monte Carlo (Cappe et al. 2004).
+
+    Each round draws ``size`` points of the current proposal in one vectorised call of
+    ``post`` and weights them by ``post / proposal``; the effective sample size of the weights
+    measures how well that proposal matches the posterior.  While it is at least
+    :data:`IMPORTANCE_MIN_ESS` and below :data:`IMPORTANCE_GOOD` of the draws, the proposal is
+    refitted to the weighted draws (number of components chosen on held-out draws) for the
+    next round.  The result is the best proposal measured, and ``nwalkers`` distinct draws of
+    its round picked with probability proportional to their weights (in the typical set:
+    little burn-in).  Returns (proposal, walkers or None when every round's weights were
+    degenerate, list of rounds: draws, effective sample size, points inside the support,
+    whether a refit followed).
+    """
+    record, best = [], None  # best: (ess, proposal, walkers)
+    for _ in range(rounds):
+        x = proposal.draw(rng, size)
+        log_w = post(x) - proposal.logpdf(x)
+        finite = np.isfinite(log_w)
+        if finite.sum() < nwalkers:
+            record.append({"draws": size, "ess": 0.0, "inside_support": int(finite.sum()), "refit": False})
+            break
+        w = np.where(finite, np.exp(log_w - log_w[finite].max()), 0.0)
+        w /= w.sum()
+        ess = float(1.0 / np.sum(w * w))
+        if best is None or ess > best[0]:
+            best = (ess, proposal, x[rng.choice(size, nwalkers, replace=False, p=_floor(w, nwalkers))])
+        refit = IMPORTANCE_MIN_ESS <= ess < IMPORTANCE_GOOD * size and len(record) + 1 < rounds
+        record.append({"draws": size, "ess": ess, "inside_support": int(finite.sum()), "refit": refit})
+        if not refit:
+            break
+        half = size // 2
+        k = select_mixture(x[:half], x[half:], COMPONENT_CHOICES, rng, train_weights=w[:half] + 1e-300,
+                           test_weights=w[half:] + 1e-300, nu=proposal.nu)
+        proposal = fit_mixture(x, k, rng, weights=w, nu=proposal.nu)
+    if best is None or best[0] < IMPORTANCE_MIN_ESS:
+        return proposal if best is None else best[1], None, record
+    return best[1], best[2], record
+
+
+def _floor(w, k):
+    """Probabilities ``w`` with every finite draw given at least a tiny share, so that ``k``
+    distinct draws can always be picked."""
+    p = np.where(w > 0, np.maximum(w, 1e-12), 0.0)
+    if np.count_nonzero(p) < k:
+        raise ValueError("fewer finite draws than walkers")
+    return p / p.sum()
 
 
 def _subsample(x, size, rng):

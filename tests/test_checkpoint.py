@@ -18,6 +18,7 @@ from skinfit.errors import InputError
 from skinfit.fit import as_generator
 from skinfit.optimize import MAPResult
 from skinfit.posterior import Posterior
+from skinfit.proposal import MixtureT
 from skinfit.sampling import check_points, run_emcee
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
@@ -97,7 +98,7 @@ def test_resume_after_interrupt_inside_a_step_mid_interval():
     path = Path(os.environ.get("TMPDIR", "/tmp")) / f"skinfit-ckpt-{os.getpid()}.h5"
     ckpt = Checkpoint(path, {"format": 1}, interval=1e9)
     rng.bit_generator.state = state
-    ckpt.start(z, state, MAPResult(np.zeros(4), 0.0, (), 0, 0.0))
+    ckpt.start(z, state, MAPResult(np.zeros(4), 0.0, (), 0, 0.0), MixtureT([1.0], np.zeros((1, 4)), np.eye(4)[None]))
     with pytest.raises(KeyboardInterrupt):
         run_emcee(Interrupting(720), z, rng, checkpoint=ckpt, **kw)  # ~2 evaluations a step
     saved = load_checkpoint(path)

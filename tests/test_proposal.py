@@ -54,8 +54,8 @@ def test_fit_mixture_recovers_two_components(rng):
 
 
 def test_fit_mixture_uses_fewer_components_for_few_samples(rng):
-    """Fewer than 5 (d + 1) samples per component: fewer components are fitted."""
-    x = rng.normal(size=(60, 5))
+    """Fewer than 10 (d + 1) samples per component: fewer components are fitted."""
+    x = rng.normal(size=(130, 5))
     assert len(fit_mixture(x, 6, rng).weights) <= 2
     single = fit_mixture(x[:20], 6, rng)
     np.testing.assert_allclose(single.means[0], x[:20].mean(axis=0))

@@ -115,7 +115,7 @@ def test_resume_after_refits_replays_them_exactly():
     path = Path(os.environ.get("TMPDIR", "/tmp")) / f"skinfit-adapt-{os.getpid()}.h5"
     ckpt = Checkpoint(path, {"format": 1}, interval=1e9)
     rng.bit_generator.state = state
-    ckpt.start(z, state, MAPResult(np.zeros(3), 0.0, (), 0, 0.0))
+    ckpt.start(z, state, MAPResult(np.zeros(3), 0.0, (), 0, 0.0), proposal)
     with pytest.raises(KeyboardInterrupt):
         run_emcee(Interrupting(400), z, rng, checkpoint=ckpt, **kw)  # 1-2 evaluations a step
     saved = load_checkpoint(path)

@@ -18,6 +18,8 @@ where v_x has a sharp minimum of width ~ v_y (1.3e-6 on doubling; 2e-7 at 0.05 r
 the integrand is evaluated on (k, rows, 2*PHASES) arrays, about six at the peak.
 """
 
+from functools import lru_cache
+
 import numpy as np
 
 __all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic", "ultrasonic_projected",
@@ -27,11 +29,17 @@ __all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic
 PHASES = 48
 
 
+#: exp(x) for x < -700 is below 1e-304, negligible beside every term it enters, and numpy's
+#: exp takes a slow path (~5x) for arguments whose result underflows: they are clipped here
+#: (broad ensembles, e.g. the MAP's prior draws, meet them at many quadrature nodes).
+_EXP_FLOOR = -700.0
+
+
 def _bracket(u, e):
     """``Vs*(1 - exp(-1/Vs)) - exp(-1/Vs)`` with ``u = 1/Vs``, ``e = exp(-u)``; cancellation-free
     for small u (series there)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.asarray(-np.expm1(-u) / u - e)
+        out = np.asarray((1.0 - e) / u - e)  # 1 - e loses < 1e-14 relative for u >= 1e-2
     small = u < 1e-2
     if small.any():
         s = u[small]  # sum_j (-1)^(j+1) j u^j/(j+1)!, to j = 6
@@ -43,19 +51,30 @@ def mu_equilibrium(v, mu_star, q, v0):
     """Equilibrium friction coefficient mu_E at speed ``v`` >= 0 [m/s] (eq. 3 of seed 004).
 
     ``mu_E = 2*mu_star*(q+1)*(Vs*(1-exp(-1/Vs)) - exp(-1/Vs)) / (1 + q - exp(-1/Vs))``,
-    ``Vs = v/v0``; tends to 0 as ``v -> 0`` (the bracket behaves like Vs).
+    ``Vs = v/v0``; tends to 0 as ``v -> 0`` (the bracket behaves like Vs).  ``v`` may lack the
+    leading parameter axes of the others (speeds shared by an ensemble): what depends on ``v``
+    alone is computed once.
     """
+    v = np.asarray(v, dtype=float)
     moving = v > 0.0
     with np.errstate(divide="ignore"):
-        u = np.where(moving, v0 / np.where(moving, v, 1.0), 1.0)
-    e = np.exp(-u)
-    value = 2.0 * mu_star * (q + 1.0) * _bracket(u, e) / (1.0 + q - e)
-    return np.where(moving, value, 0.0)
+        inv_v = np.where(moving, 1.0 / np.where(moving, v, 1.0), 1.0)  # no parameter axes yet
+    u = np.multiply(v0, inv_v)
+    e = np.exp(np.maximum(-u, _EXP_FLOOR))
+    value = _bracket(u, e) * mu_star * (2.0 * (np.asarray(q) + 1.0)) / ((1.0 + q) - e)
+    return value if moving.all() else np.where(moving, value, 0.0)
 
 
 def mu_speed(v, mu_inf, mu_0, k_v):
     """Speed-dependent friction factor mu*(V) (eq. 4 of seed 004, sign as printed)."""
-    return mu_inf + (mu_inf - mu_0) * np.exp(-(v**2) / k_v)
+    return mu_inf + (mu_inf - mu_0) * np.exp(np.maximum(-(v**2) / k_v, _EXP_FLOOR))
+
+
+@lru_cache(maxsize=8)
+def _gauss_legendre(m):
+    """``m`` Gauss-Legendre nodes and weights on [0, 1] (weights summing to 1)."""
+    t, w = np.polynomial.legendre.leggauss(m)
+    return (t + 1) / 2, w / 2
 
 
 def _phase_nodes(vf_x, vy, amp_v, m):
@@ -68,8 +87,7 @@ def _phase_nodes(vf_x, vy, amp_v, m):
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(amp_v > 0, vf_x / np.where(amp_v > 0, amp_v, 1.0), -2.0)
     split = np.arccos(np.clip(ratio, -1.0, 1.0))[..., None]  # pi when there is no kink
-    t, w = np.polynomial.legendre.leggauss(m)
-    t, w = (t + 1) / 2, w / 2  # on [0, 1], weights summing to 1
+    t, w = _gauss_legendre(m)
     phases = np.concatenate([split * t, split + (np.pi - split) * t], axis=-1)
     weights = np.concatenate([split * w, (np.pi - split) * w], axis=-1) / np.pi
     return phases, weights
@@ -99,7 +117,8 @@ def period_average(f, velocity, angle, amplitude_pp, frequency, m=PHASES):
             weights = np.ones((int(rows.sum()), 1))
             vx = vf_x[rows][:, None]
         vyy = np.broadcast_to(vy[rows][:, None], vx.shape)
-        parts[nodes] = (rows, np.sum(weights * f(np.hypot(vx, vyy), vx, vyy, rows), axis=-1))
+        values = f(np.hypot(vx, vyy), vx, vyy, rows)
+        parts[nodes] = (rows, np.einsum("...rn,rn->...r", values, np.broadcast_to(weights, values.shape[-2:])))
     lead = np.broadcast_shapes(*(v.shape[:-1] for _, v in parts.values()))
     out = np.empty(lead + velocity.shape)
     for rows, values in parts.values():
