@@ -140,3 +140,24 @@ def test_walkers_placed_around_a_map_in_a_corner_of_the_prior(rng):
     assert np.isfinite(post(z0[None]))[0]
     p0 = initial_ball(post, z0, np.eye(post.ndim), 64, rng)
     assert np.all(np.isfinite(post(p0))) and len(np.unique(p0, axis=0)) == 64
+
+
+def test_importance_start_improves_a_poor_proposal_and_places_walkers(rng):
+    """From a proposal off the target (mean shifted by 1 sd, 1.5 sd wide, no correlations), population
+    Monte Carlo rounds raise the effective sample size of the importance weights, and the
+    walkers are distinct draws inside the support; from a hopeless proposal (far away), no
+    walkers are returned and the caller falls back to the ball around the MAP."""
+    from skinfit.sampling import IMPORTANCE_GOOD, importance_start
+
+    target = _Gaussian()
+    sd = np.sqrt(np.diag(target.cov))
+    poor = MixtureT([1.0], (target.mean + sd)[None], np.diag((1.5 * sd) ** 2)[None])
+    proposal, walkers, rounds = importance_start(target, poor, 32, rng)
+    ess = [r["ess"] for r in rounds]
+    assert len(rounds) >= 2 and ess[-1] > 3 * ess[0] and max(ess) >= IMPORTANCE_GOOD * rounds[0]["draws"]
+    assert walkers.shape == (32, 4) and len(np.unique(walkers, axis=0)) == 32
+    # the returned proposal is the one that scored best, and it resembles the target
+    np.testing.assert_allclose(proposal.weights @ proposal.means, target.mean, atol=0.2 * sd.max())
+    far = MixtureT([1.0], (target.mean + 50 * sd)[None], np.diag(sd**2)[None])
+    _, none, record = importance_start(target, far, 32, rng)
+    assert none is None and record[0]["ess"] < 50
