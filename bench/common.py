@@ -108,7 +108,7 @@ def fit_start(post, seed):
     """The start :func:`skinfit.fit` makes from ``seed``, drawn in the same order: (MAP result,
     initial proposal, walkers p0, emcee's RandomState state)."""
     rng = np.random.default_rng(seed)
-    map_result, proposal, p0 = start(post, rng, nwalkers=default_walkers(post))
+    map_result, proposal, p0, _ = start(post, rng, nwalkers=default_walkers(post))
     emcee_seed = int(rng.integers(2**32 - 1))  # run_emcee's first draw
     return map_result, proposal, p0, emcee_seed
 
@@ -130,7 +130,8 @@ def run_skinfit(model, dataset, priors, seed):
     refits = [a["step"] for a in s.get("adaptation", []) if a["refit"]]
     note = (f"own criteria {'met' if s['converged'] else 'NOT met: ' + '; '.join(s['reasons'])}; "
             f"{s['n_steps']} steps x {s['nwalkers']} walkers, refits at {refits}, max tau {max(s['tau'].values()):.1f}, "
-            f"MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, result tree {t.get('tree_s', float('nan')):.2f} s")
+            f"MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, "
+            f"result tree {t['tree_s']:.2f} s")
     return Result("skinfit.fit", wall, ess, rhat, evals, mem.mb, note,
                   extra={"fit": fit, "timings": t, "sampler": s})
 

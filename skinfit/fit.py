@@ -102,12 +102,14 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         if resume and Path(checkpoint).exists():
             saved = load_checkpoint(checkpoint)
             saved.verify(ckpt.identity)
+    t_begin = time.perf_counter()
     if saved is None:
         map_result, proposal, p0, rounds = start(post, rng, nwalkers=nwalkers, n_global=n_global, n_local=n_local)
     else:
         map_result, proposal, p0 = map_from_record(saved.map), MixtureT.from_dict(saved.proposal), saved.p0
         rounds = saved.importance
         rng.bit_generator.state = saved.generator_state
+    t_start_s = time.perf_counter() - t_begin
     if ckpt is not None:
         ckpt.start(p0, rng.bit_generator.state, map_result, proposal, rounds)
     run = run_emcee(post, p0, rng, ess_target=ess_target, max_steps=max_steps, progress=progress,
@@ -121,8 +123,9 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     t_tree = time.perf_counter()
     idata = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
     now = time.perf_counter()
-    idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds, "sampling_s": run.seconds,
-                                         "tree_s": now - t_tree, "total_s": now - t_start})
+    idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds,
+                                         "start_s": t_start_s if saved is None else 0.0,
+                                         "sampling_s": run.seconds, "tree_s": now - t_tree, "total_s": now - t_start})
     for w in json.loads(idata.attrs["warnings"]):  # non-convergence was warned above
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
@@ -374,9 +377,14 @@ class Fit:
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
                  f"acceptance mean {s['acceptance_mean']:.3f} (min {s['acceptance_min']:.3f})  "
                  f"max R-hat {s['rhat_max']:.4f}",
-                 f"moves: {s['moves']}; proposal refitted at steps "
-                 f"{', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
-                 f"wall time: MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s"
+                 f"moves: {s['moves']}",
+                 "proposal: importance start, effective sample size "
+                 + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
+                 + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
+                 f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
+                 f"wall time: MAP {t['map_s']:.2f} s"
+                 + (f", importance start {t['start_s'] - t['map_s']:.2f} s" if "start_s" in t else "")
+                 + f", sampling {t['sampling_s']:.2f} s"
                  + (f", result tree {t['tree_s']:.2f} s" if "tree_s" in t else "") + f", total {t['total_s']:.2f} s",
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
