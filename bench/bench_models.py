@@ -67,10 +67,11 @@ def _first_draw(fit):
 def bench(name, args):
     model, data, prior_id = POSTERIORS[name]
     priors = skinfit.load_priors(prior_id)
-    rows = [run_skinfit(model, data, priors, args.seed)]
+    loaded = skinfit.load_model(model), skinfit.load_dataset(data)
+    rows = [run_skinfit(*loaded, priors, args.seed)]
     print(name, rows[-1].method, f"{rows[-1].wall_s:.2f}", rows[-1].note, flush=True)
     sk = rows[0]
-    rows.append(run_bare_emcee(posterior_for(model, data, priors), args.seed, sk.extra["sampler"]))
+    rows.append(run_bare_emcee(loaded[0], loaded[1], priors, args.seed, sk.extra["sampler"]))
     print(name, rows[-1].method, f"{rows[-1].wall_s:.2f}", rows[-1].note, flush=True)
     bare = rows[1]
     fit = sk.extra["fit"]
@@ -101,7 +102,7 @@ def bench(name, args):
         check_fused(post, fused, z)
         thr.append((k, throughput(post, z), throughput(fused, z)))
 
-    repeats = [run_skinfit(model, data, priors, args.seed + i) for i in range(1, args.repeats + 1)]
+    repeats = [run_skinfit(*loaded, priors, args.seed + i) for i in range(1, args.repeats + 1)]
     walls = np.array([sk.wall_s] + [r.wall_s for r in repeats])
     per_seed = [sk] + repeats
 

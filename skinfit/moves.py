@@ -1,16 +1,18 @@
-"""A correct, vectorised differential-evolution snooker move for emcee.
+"""The moves skinfit samples with: independence Metropolis-Hastings from a fitted mixture
+(the main move, see skinfit/sampling.py), emcee's differential evolution with a vectorised
+accept step, and a correct snooker move.
 
 emcee 3.1.6 (the current release) ships a ``DESnookerMove`` whose direction vector is not a
 unit vector and whose Metropolis factor is half the correct one, so it does not leave the
-target invariant (fixed upstream in dfm/emcee PR #531, Dec 2024, not yet released).  This is
-the move of Ter Braak & Vrugt (2008), Stat. Comput. 18:435: for a walker ``s`` and three other
-walkers ``z, z1, z2``, with ``e = (s - z)/|s - z|``::
+target invariant (fixed upstream in dfm/emcee PR #531, Dec 2024, not yet released).
+:class:`SnookerMove` is the move of Ter Braak & Vrugt (2008), Stat. Comput. 18:435: for a
+walker ``s`` and three other walkers ``z, z1, z2``, with ``e = (s - z)/|s - z|``::
 
     q = s + gamma * (e . (z1 - z2)) * e,      log factor = (d - 1) * log(|q - z| / |s - z|)
 
 vectorised over the walkers of a half-ensemble (emcee's own loops over walkers in Python).
-tests/test_moves.py checks it on a correlated Gaussian, with emcee's released move as the
-negative control.
+tests/test_moves.py checks every move on a correlated Gaussian, with emcee's released
+snooker move and an independence move without its Hastings factor as negative controls.
 """
 
 import numpy as np
@@ -116,7 +118,8 @@ class IndependenceMove(Move):
 
 
 def default_moves():
-    """The move mixture skinfit samples with, chosen by measurement (see sampling.py): on the
-    shipped electroadhesion posterior, max autocorrelation time 35 steps with 10% snooker vs
-    39 with 20%; on a standard 8-D Gaussian, 26-28 steps either way."""
+    """The moves for a target without an independence proposal (the population
+    hyper-posterior): DE 0.9 + snooker 0.1, chosen by measurement on the shipped
+    electroadhesion posterior (max autocorrelation time 35 steps with 10% snooker vs 39 with
+    20%; on a standard 8-D Gaussian, 26-28 steps either way)."""
     return [(DEMove(), 0.9), (SnookerMove(), 0.1)]
