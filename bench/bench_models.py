@@ -64,6 +64,21 @@ def _first_draw(fit):
     return np.stack(cols, axis=-1)
 
 
+def _carried_rows(name, args):
+    """Table rows of the methods skipped in this run, from the last results file (marked with
+    its date; their 'x skinfit' column is relative to that run's skinfit)."""
+    path = RESULTS / f"{name}.md"
+    if not path.exists():
+        return ""
+    text = path.read_text()
+    date = text.split("` - ", 1)[1].split("\n", 1)[0] if "` - " in text else "an earlier run"
+    skipped = [m for m, flag in (("plain", args.skip_plain), ("dynesty", args.skip_dynesty), ("PyMC", args.skip_pymc))
+               if flag]
+    rows = [line for line in text.splitlines() if any(line.startswith(f"| {m}") for m in skipped)]
+    return "".join(f"\n{line.rstrip(' |')} (not rerun: run of {date}) |" if "(not rerun" not in line else f"\n{line}"
+                   for line in rows)
+
+
 def bench(name, args):
     model, data, prior_id = POSTERIORS[name]
     priors = skinfit.load_priors(prior_id)
@@ -116,6 +131,7 @@ def bench(name, args):
         "bare_s": bare.wall_s, "overhead_total": sk.wall_s / bare.wall_s - 1, "overhead_to_samples": to_samples / bare.wall_s - 1,
         "same_chain": same,
         "plain_s": found["plain"].wall_s if "plain" in found else None,
+        "plain_converged": found["plain"].converged if "plain" in found else None,
         "dynesty_s": found["dynesty"].wall_s if "dynesty" in found else None,
         "dynesty_converged": found["dynesty"].converged if "dynesty" in found else None,
         "dynesty_note": found["dynesty"].note if "dynesty" in found else None,
@@ -135,7 +151,7 @@ def bench(name, args):
              "chains; dynesty: Kish ESS of its weights, R-hat over 4 random quarters of its equal-weight resample). "
              "Wall time includes the MAP search (emcee methods), compilation (PyMC) and the full result tree "
              "(skinfit). One process, one run, methods one after another; every library imported and a short "
-             "untimed fit run first.", "", table(rows), "",
+             "untimed fit run first.", "", table(rows) + _carried_rows(name, args), "",
              "## Log-density throughput (evaluations/s; same posterior draws, values checked equal)", "",
              "| walkers | skinfit `Posterior.__call__` | one fused numpy expression | fused / skinfit |",
              "|---|---|---|---|"]
@@ -164,7 +180,9 @@ def write_summary(results, info):
     lines = ["# Issue 7 targets, per posterior", "",
              "From `bench/bench_models.py` (each row's own run: its date and machine load are in "
              "bench/results/<posterior>.md). Ratios are wall time to a converged posterior (ArviZ R-hat <= 1.01, "
-             "min bulk ESS >= 400), methods in one process, one run.", "", machine_text(info), "",
+             "min bulk ESS >= 400), methods in one process, one run; a method marked 'run of DATE' was skipped "
+             "in the row's latest run and is that earlier run's figure, its ratio taken against the latest skinfit "
+             "time.", "", machine_text(info), "",
              "| posterior | rows (distinct), params | skinfit s | PyMC NUTS s (x) | dynesty s (x) | plain emcee DE s (x) "
              "| ESS/s | overhead vs bare loop: to samples / with tree | fused / skinfit (32, 128 walkers) "
              "| skinfit over seeds: median [range] s |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -173,13 +191,15 @@ def write_summary(results, info):
         v = r.get(key)
         if v is None or not math.isfinite(v):
             return "not run"
-        mark = "" if conv is None or r.get(conv) else ", NOT converged"
+        mark = "" if conv is None or r.get(conv) is not False else ", NOT converged"
+        carried = r.get(key.replace("_s", "_carried"))
+        mark += f"; run of {carried}" if carried else ""
         return f"{v:.1f} ({v / r['skinfit_s']:.0f}x{mark})"
 
     for r in results.values():
         lines.append(f"| {r['posterior']} | {r['rows']} ({r['distinct_rows']}), {r['parameters']} | {r['skinfit_s']:.2f} | "
                      f"{ratio(r, 'pymc_s', 'pymc_converged')} | {ratio(r, 'dynesty_s', 'dynesty_converged')} | "
-                     f"{ratio(r, 'plain_s')} | {r['ess_per_s']:.0f} | "
+                     f"{ratio(r, 'plain_s', 'plain_converged')} | {r['ess_per_s']:.0f} | "
                      f"{100 * r['overhead_to_samples']:+.0f}% / {100 * r['overhead_total']:+.0f}% | "
                      f"{r['fused_ratio'][0]:.2f}, {r['fused_ratio'][1]:.2f} | "
                      f"{r['seeds_median_s']:.2f} [{r['seeds_min_s']:.2f}, {r['seeds_max_s']:.2f}] "
@@ -222,7 +242,15 @@ def main():
     store = RESULTS / "results.json"
     results = json.loads(store.read_text()) if store.exists() else {}
     for name in args.models:
-        results[name] = bench(name, args)
+        new = bench(name, args)
+        old = results.get(name, {})
+        for method in ("plain", "dynesty", "pymc"):  # a skipped method keeps its last run, marked
+            if new.get(f"{method}_s") is None and old.get(f"{method}_s") is not None:
+                for key, value in old.items():
+                    if key.startswith(f"{method}_"):
+                        new[key] = value
+                new.setdefault(f"{method}_carried", old.get(f"{method}_carried", old["date"]))
+        results[name] = new
         results = {k: results[k] for k in POSTERIORS if k in results}
         store.write_text(json.dumps(results, indent=1) + "\n")
         write_summary(results, machine_info())

@@ -321,17 +321,17 @@ class Posterior:
                 total += logpdf(theta[:, cols], args, None, None).sum(axis=1)
         return np.where(inside, total, -np.inf)
 
-    def _evaluate(self, theta, pointwise):
+    def _evaluate(self, theta, pointwise, predict=True):
         """:meth:`_evaluate_block` over blocks of at most ``CHUNK`` parameter vectors.
 
         Bounds memory where a model's forward function works on larger arrays than (k, n)
         (the ultrasonic period average: (k, n, 96); 2000 vectors in one call took 3.5 GB).
         """
         if len(theta) <= self.CHUNK:
-            return self._evaluate_block(theta, pointwise)
+            return self._evaluate_block(theta, pointwise, predict)
         ll, pred, valid = {}, {}, np.empty(len(theta), dtype=bool)
         for i in range(0, len(theta), self.CHUNK):
-            part = self._evaluate_block(theta[i:i + self.CHUNK], pointwise)
+            part = self._evaluate_block(theta[i:i + self.CHUNK], pointwise, predict)
             for out, values in zip((ll, pred), part[:2]):
                 for o, v in values.items():
                     if o not in out:
@@ -340,13 +340,14 @@ class Posterior:
             valid[i:i + self.CHUNK] = part[2]
         return ll, pred, valid
 
-    def _evaluate_block(self, theta, pointwise):
+    def _evaluate_block(self, theta, pointwise, predict=True):
         """Forward model + noise log-likelihood: (ll, pred, valid).
 
         ``ll`` maps observable -> (k, n) pointwise values when ``pointwise``, else -> (k,)
         totals (the sampling hot path: the forward model and the normal / log-normal
         likelihood on distinct rows only, see :meth:`_unique_rows`); ``pred`` maps
-        observable -> (k, n) predictions.
+        observable -> (k, n) predictions (empty unless ``predict`` or ``pointwise``: expanding
+        to every row cost a quarter of a call on contact_area).
         """
         theta = np.atleast_2d(theta)
         k = len(theta)
@@ -359,9 +360,12 @@ class Posterior:
         ll, pred = {}, {}
         for o in self.observables:
             suffix = "" if len(self.observables) == 1 else f"_{o}"
-            mu_u = np.broadcast_to(pred_u[o], (k, self.n_unique))
-            pred[o] = mu_u[:, self._inverse]
+            mu_u = pred_u[o]
+            if mu_u.shape != (k, self.n_unique):
+                mu_u = np.broadcast_to(mu_u, (k, self.n_unique))
             noise = self.noise[o]
+            if predict or pointwise or noise == "student_t":
+                pred[o] = mu_u[:, self._inverse]
             if noise != "student_t" and not pointwise:
                 sigma = params[f"sigma{suffix}"]
                 with np.errstate(divide="ignore", invalid="ignore"):
@@ -374,15 +378,12 @@ class Posterior:
             else:
                 sigma = theta[:, self._param_index[f"sigma{suffix}"]]
                 sigma = sigma[:, None] if sigma.ndim == 1 else sigma
-                mu = pred[o]
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    if noise == "lognormal":
-                        r = np.log(mu)
+                    if noise == "lognormal":  # the log on distinct rows, then to every row
+                        r = np.log(mu_u)[:, self._inverse]
                         np.subtract(self._logy[o], r, out=r)
-                        offset = self._logy[o] + (np.log(sigma) + 0.5 * _LOG_2PI)
                     else:
-                        r = self.y[o] - mu
-                        offset = np.log(sigma) + 0.5 * _LOG_2PI
+                        r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
                         nu = theta[:, self._param_index[f"nu{suffix}"]]
@@ -393,7 +394,9 @@ class Posterior:
                         value = r
                         value *= value
                         value *= -0.5
-                        value -= offset
+                        value -= np.log(sigma) + 0.5 * _LOG_2PI
+                        if noise == "lognormal":
+                            value -= self._logy[o]
                 value = np.broadcast_to(value, (k, self.n))
                 ll[o] = value if pointwise else value.sum(axis=1)
             if not valid.all():
@@ -444,7 +447,7 @@ class Posterior:
         return out
 
     def log_likelihood(self, theta):
-        ll, _, _ = self._evaluate(np.atleast_2d(theta), False)
+        ll, _, _ = self._evaluate(np.atleast_2d(theta), False, predict=False)
         total = None
         for v in ll.values():
             total = v if total is None else total + v

@@ -44,7 +44,7 @@ def critical_load(E_skin_micro, sample_modulus, asperity_radius, asperity_height
     return g ** (1.0 / (1.0 - m_a))
 
 
-def contact_state(p, x, c, *, transition=True):
+def contact_state(p, x, c, *, transition=True, pressures=True):
     """Contact areas and pressures of the analytic reading of seed 002, Section 3.
 
     Parameters ``E_skin_micro`` [Pa], ``k_a`` [m^2/N^m_a], ``m_a`` [-] (arrays broadcastable to
@@ -55,9 +55,9 @@ def contact_state(p, x, c, *, transition=True):
     pressure F/A_ac [Pa]; ``x`` the full-contact fraction A_trans/A_ac (eq. 9; 0 when
     ``transition`` is False and on a flat reference); ``p_trans``, ``p_asp`` mean pressures of
     the full-contact and asperity zones [Pa] (eqs. 11-12 in closed form: pbar*(1-(1-x)**1.5)/x
-    and pbar*sqrt(1-x); p_trans = 1.5*pbar as x -> 0); ``A_r`` real contact area [m^2]; and
-    ``flat`` (bool, (n,)) and ``ok`` (bool, (n,): texture geometry either complete or all
-    missing, and F > 0).
+    and pbar*sqrt(1-x); p_trans = 1.5*pbar as x -> 0; omitted when ``pressures`` is False, as
+    the friction needs neither); ``A_r`` real contact area [m^2]; and ``flat`` (bool, (n,)) and
+    ``ok`` (bool, (n,): texture geometry either complete or all missing, and F > 0).
     """
     f = np.asarray(x["normal_force"], dtype=float)
     geo = [np.asarray(x[k], dtype=float) for k in _TEXTURE]
@@ -67,28 +67,32 @@ def contact_state(p, x, c, *, transition=True):
     r_asp, h, lam = (np.where(m, 1.0, g) for m, g in zip(missing, geo))  # harmless fill
     f_safe = np.where(f > 0, f, 1.0)
     e1 = reduced_modulus(p["E_skin_micro"], x["sample_modulus"], c)
-    a_ac = p["k_a"] * f_safe ** p["m_a"]
+    a_ac = p["k_a"] * np.exp(p["m_a"] * np.log(f_safe))  # k_a*F**m_a; log F has no parameter axes
     pbar = f_safe / a_ac
-    f_i = pbar * lam**2  # mean force per asperity, eq. 6
+    lam2 = lam**2
     if transition:
-        f_crit = (4.0 / 3.0) * e1 * np.sqrt(r_asp) * h**1.5  # Hertz force at indentation h, eq. 13
-        frac = np.clip(1.0 - (2.0 * f_crit / (3.0 * f_i)) ** 2, 0.0, 1.0)  # eq. 9
+        # 2*F_crit/(3*F_i): F_crit = (4/3)*E1*sqrt(R_asp)*h**1.5 (Hertz at indentation h, eq. 13),
+        # F_i = pbar*lambda**2 (mean force per asperity, eq. 6)
+        s = e1 * ((8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2) / pbar
+        frac = np.clip(1.0 - s * s, 0.0, 1.0)  # eq. 9
     else:
-        frac = np.zeros(np.broadcast_shapes(np.shape(f_i), np.shape(e1)))
-    frac = np.where(flat, 0.0, frac)
+        frac = np.zeros(np.broadcast_shapes(np.shape(pbar), np.shape(e1)))
+    if flat.any():
+        frac = np.where(flat, 0.0, frac)
     one_minus = 1.0 - frac
     p_asp = pbar * np.sqrt(one_minus)  # eq. 12
-    with np.errstate(divide="ignore", invalid="ignore"):
-        p_trans = np.where(frac > 0, pbar * (1.0 - one_minus**1.5) / frac, 1.5 * pbar)  # eq. 11
-    a_i = np.cbrt(3.0 * p_asp * lam**2 * r_asp / (4.0 * e1))  # Hertz radius of one asperity contact
-    cell = np.minimum(1.0, np.pi * a_i**2 / lam**2)
-    a_r = a_ac * np.where(flat, 1.0, frac + one_minus * cell)
-    return {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_trans": p_trans, "p_asp": p_asp, "A_r": a_r,
-            "flat": flat, "ok": ok}
+    a_i = np.cbrt(p_asp * (0.75 * lam2 * r_asp) / e1)  # Hertz radius of one asperity contact
+    cell = np.minimum(1.0, a_i * a_i * (np.pi / lam2))
+    a_r = a_ac * (np.where(flat, 1.0, frac + one_minus * cell) if flat.any() else frac + one_minus * cell)
+    out = {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_asp": p_asp, "A_r": a_r, "flat": flat, "ok": ok}
+    if pressures:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out["p_trans"] = np.where(frac > 0, pbar * (1.0 - one_minus**1.5) / frac, 1.5 * pbar)  # eq. 11
+    return out
 
 
 def _friction(p, x, c, *, transition, hysteresis):
-    s = contact_state(p, x, c, transition=transition)
+    s = contact_state(p, x, c, transition=transition, pressures=False)
     f = np.where(s["ok"], x["normal_force"], 1.0)
     mu = p["tau0"] * s["A_r"] / f + p["alpha"]
     if hysteresis:
