@@ -16,10 +16,10 @@ import skinfit
 from skinfit.checkpoint import Checkpoint, load_checkpoint
 from skinfit.errors import InputError
 from skinfit.fit import as_generator
-from skinfit.optimize import MAPResult
+from skinfit.optimize import MAPResult, laplace_covariance
 from skinfit.posterior import Posterior
 from skinfit.proposal import MixtureT
-from skinfit.sampling import check_points, run_emcee
+from skinfit.sampling import check_points, initial_ball, run_emcee
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL, DATA = "electroadhesion_coulomb", "electroadhesion_synthetic"
@@ -75,9 +75,12 @@ def test_sigkill_then_resume_equals_uninterrupted_run(reference, tmp_path):
     _assert_same_samples(reference, skinfit.load_fit(tmp_path))
 
 
-def test_resume_after_interrupt_inside_a_step_mid_interval():
+@pytest.mark.parametrize("adaptive, stop_after", [(False, 720), (True, 400)], ids=["de-moves", "adaptive"])
+def test_resume_after_interrupt_inside_a_step_mid_interval(adaptive, stop_after):
     """A KeyboardInterrupt raised inside a log-density evaluation, between convergence checks:
-    the checkpoint holds the last completed step, and resuming reproduces the full chain."""
+    the checkpoint holds the last completed step, and resuming reproduces the full chain.  With
+    the adaptive independence proposal the interrupt lands after two refits (steps 100, 200),
+    which the resumed run recomputes from the saved chain."""
     post = Posterior(skinfit.load_model(MODEL), skinfit.load_priors(MODEL), skinfit.load_dataset(DATA))
 
     class Interrupting:
@@ -92,21 +95,29 @@ def test_resume_after_interrupt_inside_a_step_mid_interval():
 
     rng = as_generator(11)
     z = post.to_z(post.sample_prior(32, rng))
-    kw = dict(ess_target=1e9, max_steps=700, check_every=200)
+    proposal = None
+    if adaptive:
+        theta = post.sample_prior(400, rng)
+        z0 = post.to_z(theta[np.argmax(post.log_density(theta))][None])[0]
+        proposal = MixtureT([1.0], z0[None], laplace_covariance(post, z0)[None])
+        z = initial_ball(post, z0, laplace_covariance(post, z0), 16, rng)
+    kw = dict(ess_target=1e9, max_steps=700, check_every=200, proposal=proposal)
     state = rng.bit_generator.state
     full = run_emcee(post, z, rng, **kw)
     path = Path(os.environ.get("TMPDIR", "/tmp")) / f"skinfit-ckpt-{os.getpid()}.h5"
     ckpt = Checkpoint(path, {"format": 1}, interval=1e9)
     rng.bit_generator.state = state
-    ckpt.start(z, state, MAPResult(np.zeros(4), 0.0, (), 0, 0.0), MixtureT([1.0], np.zeros((1, 4)), np.eye(4)[None]))
+    ckpt.start(z, state, MAPResult(np.zeros(4), 0.0, (), 0, 0.0), proposal or MixtureT([1.0], np.zeros((1, 4)), np.eye(4)[None]))
     with pytest.raises(KeyboardInterrupt):
-        run_emcee(Interrupting(720), z, rng, checkpoint=ckpt, **kw)  # ~2 evaluations a step
+        run_emcee(Interrupting(stop_after), z, rng, checkpoint=ckpt, **kw)  # ~2 (DE) or 1-2 evaluations a step
     saved = load_checkpoint(path)
     path.unlink()
     assert 200 < saved.iteration < 400 and saved.iteration not in set(check_points(200, 700))
     rng = as_generator(0)  # any: the random states come from the checkpoint
     rng.bit_generator.state = saved.generator_state
     resumed = run_emcee(post, saved.p0, rng, resume=saved, **kw)
+    assert [a["step"] for a in resumed.adaptation] == [a["step"] for a in full.adaptation]
+    assert not adaptive or any(a["refit"] for a in full.adaptation)
     assert np.array_equal(resumed.chain, full.chain) and np.array_equal(resumed.log_prob, full.log_prob)
     assert np.array_equal(resumed.acceptance, full.acceptance) and resumed.n_steps == full.n_steps == 700
 

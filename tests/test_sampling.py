@@ -1,7 +1,7 @@
 """The sampler: its autocorrelation estimate, the adaptive independence proposal (exact on a
-known target, refits replayed on resume), and walkers placed around a MAP on a bound."""
+known target; resume across refits: tests/test_checkpoint.py), the importance start, and
+walkers placed around a MAP on a bound."""
 
-import os
 from pathlib import Path
 
 import emcee
@@ -9,9 +9,7 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.checkpoint import Checkpoint, load_checkpoint
-from skinfit.fit import as_generator
-from skinfit.optimize import MAPResult, find_map, laplace_covariance
+from skinfit.optimize import find_map
 from skinfit.posterior import Posterior
 from skinfit.proposal import MixtureT
 from skinfit.sampling import ADAPT_FIRST, initial_ball, integrated_time, run_emcee
@@ -86,46 +84,6 @@ def test_adaptive_run_is_exact_and_refits_on_schedule(rng):
     assert np.all(np.abs(flat.mean(axis=0) - target.mean) < 5 * sd / np.sqrt(ess))
     assert np.all(np.abs(np.diag(np.cov(flat.T)) / np.diag(target.cov) - 1) < 5 * np.sqrt(2 / ess))
     assert run.tau.max() < 10  # DE alone: ~20 on a 4-D Gaussian
-
-
-def test_resume_after_refits_replays_them_exactly():
-    """Interrupted after two refits, a resumed run recomputes the proposal from the saved chain
-    and continues the identical chain."""
-    post = Posterior(skinfit.load_model("electroadhesion_coulomb"), skinfit.load_priors("electroadhesion_coulomb"),
-                     skinfit.load_dataset("electroadhesion_synthetic"))
-
-    class Interrupting:
-        def __init__(self, stop_after):
-            self.left, self.counts = stop_after, post.counts
-
-        def __call__(self, z):
-            self.left -= 1
-            if self.left < 0:
-                raise KeyboardInterrupt
-            return post(z)
-
-    rng = as_generator(11)
-    theta = post.sample_prior(400, rng)
-    z0 = post.to_z(theta[np.argmax(post.log_density(theta))][None])[0]
-    proposal = MixtureT([1.0], z0[None], laplace_covariance(post, z0)[None])
-    z = initial_ball(post, z0, laplace_covariance(post, z0), 16, rng)
-    kw = dict(ess_target=1e9, max_steps=700, check_every=200, proposal=proposal)
-    state = rng.bit_generator.state
-    full = run_emcee(post, z, rng, **kw)
-    path = Path(os.environ.get("TMPDIR", "/tmp")) / f"skinfit-adapt-{os.getpid()}.h5"
-    ckpt = Checkpoint(path, {"format": 1}, interval=1e9)
-    rng.bit_generator.state = state
-    ckpt.start(z, state, MAPResult(np.zeros(3), 0.0, (), 0, 0.0), proposal)
-    with pytest.raises(KeyboardInterrupt):
-        run_emcee(Interrupting(400), z, rng, checkpoint=ckpt, **kw)  # 1-2 evaluations a step
-    saved = load_checkpoint(path)
-    path.unlink()
-    assert 2 * ADAPT_FIRST < saved.iteration < 4 * ADAPT_FIRST
-    rng = as_generator(0)  # any: the random states come from the checkpoint
-    rng.bit_generator.state = saved.generator_state
-    resumed = run_emcee(post, saved.p0, rng, resume=saved, **kw)
-    assert [a["step"] for a in resumed.adaptation] == [a["step"] for a in full.adaptation]
-    assert np.array_equal(resumed.chain, full.chain) and np.array_equal(resumed.log_prob, full.log_prob)
 
 
 def test_walkers_placed_around_a_map_in_a_corner_of_the_prior(rng):
