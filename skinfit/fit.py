@@ -166,9 +166,9 @@ def default_walkers(post):
 def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=()):
     nw, nd, d = run.chain.shape
     theta = post.to_theta(run.chain.reshape(-1, d))
-    ll, pred, valid = post.pointwise(theta)
-    lp_nat = post.log_prior(theta) + sum(v.sum(axis=1) for v in ll.values())
     t_prior = post.sample_prior(n_prior_draws, rng)
+    ll, simulated = post.replicate(theta, rng)  # after the prior draws: the order of the random stream
+    lp_nat = post.log_prior(theta) + sum(v.sum(axis=1) for v in ll.values())
     posterior, prior_group, dims, coords = {}, {}, {}, {"obs_id": np.arange(post.n)}
     for pname in list(post.model.parameter_names) + list(post.noise_names):
         cols = [j for j, s in enumerate(post.slots) if s.base == pname]
@@ -181,7 +181,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
         else:
             posterior[pname] = theta[:, cols[0]].reshape(nw, nd)
             prior_group[pname] = t_prior[:, cols[0]].reshape(1, n_prior_draws)
-    ppc = {o: v.reshape(nw, nd, post.n) for o, v in post.simulate(theta, rng, (pred, valid)).items()}
+    ppc = {o: v.reshape(nw, nd, post.n) for o, v in simulated.items()}
     dims.update({o: ["obs_id"] for o in post.observables})
     loglik = {o: v.reshape(nw, nd, post.n) for o, v in ll.items()}
     constant = {c: np.asarray(v) for c, v in post.x.items()}

@@ -424,27 +424,71 @@ class Posterior:
         """
         theta = np.atleast_2d(theta)
         _, pred, valid = (None, *predictions) if predictions is not None else self._evaluate(theta, False)
+        self._require_valid(valid)
+        out = self._noise(theta, rng)
+        for o, eps in out.items():
+            self._observe(eps, np.broadcast_to(pred[o], eps.shape), theta, o)
+        return out
+
+    def replicate(self, theta, rng):
+        """Pointwise log-likelihood and one simulated data set per parameter vector:
+        (ll, simulated), dicts observable -> (k, n), equal to :meth:`pointwise` and then
+        :meth:`simulate` with the same ``rng`` state.
+
+        For the result tree of a fit (thousands of draws x every row): evaluated in blocks of
+        :attr:`BLOCK_CELLS` (draw, row) cells that stay in cache, writing straight into the two
+        outputs, with no (draws, rows) prediction arrays (contact_area, 3880 draws x 1638 rows
+        x 2 observables: 0.36-0.56 s -> 0.23 s, of which 0.13 s are the normal draws; a third less memory).  Rows of ``theta`` outside the physical
+        support raise ``ValueError``.
+        """
+        theta = np.atleast_2d(theta)
+        k = len(theta)
+        simulated = self._noise(theta, rng)  # drawn first and whole: the stream simulate() draws
+        ll = {o: np.empty((k, self.n)) for o in self.observables}
+        step = int(np.clip(self.BLOCK_CELLS // max(self.n, 1), 1, self.CHUNK))
+        for i in range(0, k, step):
+            block = theta[i:i + step]
+            part, pred, valid = self._evaluate_block(block, True)
+            self._require_valid(valid)
+            for o in self.observables:
+                ll[o][i:i + step] = part[o]
+                self._observe(simulated[o][i:i + step], pred[o], block, o)
+        return ll, simulated
+
+    #: (draw, row) cells per block of :meth:`replicate` (1 MB of float64 per array; 0.23 s
+    #: against 0.25 s at 256 kB and 0.35 s at 64 kB on the contact_area tree).
+    BLOCK_CELLS = 131072
+
+    def _require_valid(self, valid):
         if not np.all(valid):
-            raise ValueError(f"{int((~valid).sum())} parameter vector(s) outside the physical support of "
-                             f"{self.model.id}: {self.model.support}")
-        params = self.unpack(theta)
+            raise ValueError(f"{int((~np.asarray(valid)).sum())} parameter vector(s) outside the physical support "
+                             f"of {self.model.id}: {self.model.support}")
+
+    def _noise(self, theta, rng):
+        """Standardised noise draws, observable -> (k, n), in observable order (the order fixes
+        the random stream): standard normal, or standard Student-t with each draw's nu."""
         out = {}
         for o in self.observables:
-            mu = np.broadcast_to(pred[o], (len(theta), self.n))
-            suffix = "" if len(self.observables) == 1 else f"_{o}"
-            sigma = params[f"sigma{suffix}"]
             if self.noise[o] == "student_t":
-                eps = rng.standard_t(np.broadcast_to(params[f"nu{suffix}"], mu.shape))
+                nu = theta[:, self._param_index[f"nu{self._suffix(o)}"]]
+                out[o] = rng.standard_t(np.broadcast_to(nu[:, None] if nu.ndim == 1 else nu, (len(theta), self.n)))
             else:
-                eps = rng.standard_normal(mu.shape)
-            eps *= sigma  # in place: these are (draws, rows) arrays, 50 MB for contact_area
-            if self.noise[o] == "lognormal":
-                np.exp(eps, out=eps)
-                eps *= mu
-            else:
-                eps += mu
-            out[o] = eps
+                out[o] = rng.standard_normal((len(theta), self.n))
         return out
+
+    def _observe(self, eps, mu, theta, o):
+        """Standardised noise ``eps`` (k, n) turned into observations around predictions ``mu``
+        of parameter vectors ``theta``, in place (these are (draws, rows) arrays)."""
+        sigma = theta[:, self._param_index[f"sigma{self._suffix(o)}"]]
+        eps *= sigma[:, None] if sigma.ndim == 1 else sigma
+        if self.noise[o] == "lognormal":
+            np.exp(eps, out=eps)
+            eps *= mu
+        else:
+            eps += mu
+
+    def _suffix(self, o):
+        return "" if len(self.observables) == 1 else f"_{o}"
 
     def log_likelihood(self, theta):
         ll, _, _ = self._evaluate(np.atleast_2d(theta), False, predict=False)

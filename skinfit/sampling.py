@@ -150,7 +150,9 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     n = backend.iteration
     history, start = [], 0  # refits so far; the chain is homogeneous from ``start`` on
     next_adapt = ADAPT_FIRST if indep is not None and ADAPT_FIRST < max_steps else None
-    while next_adapt is not None and next_adapt <= n:  # resumed: replay the refits on the saved chain
+    # resumed: replay the refits on the saved chain (one due at the saved step itself follows
+    # that step's check, in the loop)
+    while next_adapt is not None and next_adapt < n:
         start, next_adapt = _apply_refit(indep, backend.get_chain(), next_adapt, start, seed, proposal.nu,
                                          history, max_steps)
     # the evaluation counters as of the last completed step (targets without them: none)
@@ -178,19 +180,19 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
                     if checkpoint is not None and checkpoint.due():
                         save()
                 n = target
-            if target == next_adapt:
-                start, next_adapt = _apply_refit(indep, sampler.get_chain(), target, start, seed, proposal.nu,
-                                                 history, max_steps)
-                if start == target:  # refitted: nothing to check yet
-                    checks = [c for c in checks if c > target]
-                    continue
             checks = [c for c in checks if c > target]
+            # checked before any refit due now: a refit would discard a chain that has converged
             tau, burn, ess, rhat, thin, reasons = _check(
                 sampler.get_chain(), ess_target, rhat_max, min_tau_multiple, burn_factor, keep_total,
                 start=start, need_rhat=target >= max_steps or bar is not None, natural=natural)
             if bar is not None:
                 bar.set_postfix_str(f"tau={tau.max():.0f} ess={ess.min():.0f} rhat={rhat:.3f}")
-            if not reasons or not checks:
+            if not reasons:
+                break
+            if target == next_adapt:
+                start, next_adapt = _apply_refit(indep, sampler.get_chain(), target, start, seed, proposal.nu,
+                                                 history, max_steps)
+            if not checks:
                 break
     except KeyboardInterrupt:
         save()

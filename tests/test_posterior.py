@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 import skinfit
 from skinfit.posterior import Posterior
@@ -72,6 +73,49 @@ def test_large_ensembles_are_evaluated_in_blocks_with_equal_results(rng):
     np.testing.assert_array_equal(blocked[1][2], valid)
 
 
+def _contact_area_by_subject(noise):
+    """contact_area with ``m0`` split by subject and the given noise model (Student-t: a nu
+    prior per observable)."""
+    from types import MappingProxyType
+
+    from skinfit.priors import PriorSet, parse_prior
+
+    priors = skinfit.load_priors("contact_area")
+    nu = {f"nu_{o}": parse_prior(f"nu_{o}", {"dist": "gamma", "shape": 2, "scale": 10, "bounds": [1, 200],
+                                              "source": "test"}, "t") for o in ("contact_area", "impedance")}
+    priors = PriorSet("t", priors.model, MappingProxyType({**priors.priors, **nu}))
+    return Posterior(skinfit.load_model("contact_area"), priors, skinfit.load_dataset("contact_area_synthetic"),
+                     noise=noise, split={"m0": "subject"})
+
+
+@pytest.mark.parametrize("noise", ["normal", "lognormal", "student_t"])
+def test_replicate_in_cache_blocks_equals_pointwise_then_simulate(noise, rng):
+    """The result tree's log-likelihood and posterior predictive, computed block by block
+    (:meth:`Posterior.replicate`, here 3 draws per block), equal :meth:`pointwise` followed by
+    :meth:`simulate` from the same random state, bit for bit; and the simulated noise follows
+    the noise model: the probability integral transform of every (draw, row) cell under
+    scipy's distribution with that draw's parameters is uniform (Kolmogorov-Smirnov)."""
+
+    post = _contact_area_by_subject(noise)
+    theta = post.sample_prior(300, rng)
+    theta = theta[post.pointwise(theta)[2]][:40]
+    post.BLOCK_CELLS = 3 * post.n
+    ll, simulated = post.replicate(theta, np.random.default_rng(5))
+    ref_ll, pred, valid = post.pointwise(theta)
+    ref_sim = post.simulate(theta, np.random.default_rng(5), (pred, valid))
+    p = post.unpack(theta)
+    for o in post.observables:
+        np.testing.assert_array_equal(ll[o], ref_ll[o])
+        np.testing.assert_array_equal(simulated[o], ref_sim[o])
+        mu, y, sigma = pred[o], simulated[o], p[f"sigma_{o}"]
+        pit = {"normal": lambda: stats.norm.cdf(y, mu, sigma),
+               "student_t": lambda: stats.t.cdf(y, p[f"nu_{o}"], mu, sigma),
+               "lognormal": lambda: stats.lognorm.cdf(y, sigma, scale=mu)}[noise]()
+        assert stats.kstest(pit.ravel(), "uniform").pvalue > 1e-3
+    with pytest.raises(ValueError, match="outside the physical support"):
+        post.replicate(post.sample_prior(300, rng), rng)
+
+
 @pytest.mark.parametrize("noise", ["normal", "lognormal", "student_t"])
 def test_totals_over_repeated_rows_equal_the_row_by_row_sum(noise, rng):
     """The sampling hot path evaluates the forward model once per distinct row and sums the
@@ -79,19 +123,8 @@ def test_totals_over_repeated_rows_equal_the_row_by_row_sum(noise, rng):
     the total must equal scipy's log-density summed row by row.  contact_area: 13 subjects
     pressed at the same 42 (force, actuation force) settings, two observables; with ``m0``
     split by subject the groups must also separate the subjects (546 groups, not 42)."""
-    from types import MappingProxyType
-
-    from scipy import stats
-
-    from skinfit.priors import PriorSet, parse_prior
-
-    model = skinfit.load_model("contact_area")
-    ds = skinfit.load_dataset("contact_area_synthetic")
-    priors = skinfit.load_priors("contact_area")
-    nu = {f"nu_{o}": parse_prior(f"nu_{o}", {"dist": "gamma", "shape": 2, "scale": 10, "bounds": [1, 200],
-                                              "source": "test"}, "t") for o in ("contact_area", "impedance")}
-    priors = PriorSet("t", priors.model, MappingProxyType({**priors.priors, **nu}))
-    post = Posterior(model, priors, ds, noise=noise, split={"m0": "subject"})
+    post = _contact_area_by_subject(noise)
+    model = post.model
     assert (post.n, post.n_unique) == (1638, 546)
     theta = post.sample_prior(30, rng)
     p = post.unpack(theta)

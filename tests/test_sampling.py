@@ -12,6 +12,7 @@ import skinfit
 from skinfit.optimize import find_map
 from skinfit.posterior import Posterior
 from skinfit.proposal import MixtureT
+from skinfit import sampling
 from skinfit.sampling import ADAPT_FIRST, initial_ball, integrated_time, run_emcee
 
 BENCH_PRIORS = Path(__file__).parents[1] / "bench" / "priors_electroadhesion_uniform.toml"
@@ -119,3 +120,17 @@ def test_importance_start_improves_a_poor_proposal_and_places_walkers(rng):
     far = MixtureT([1.0], (target.mean + 50 * sd)[None], np.diag(sd**2)[None])
     _, none, record = importance_start(target, far, 32, rng)
     assert none is None and record[0]["ess"] < 50
+
+
+def test_a_chain_converged_at_a_refit_step_is_kept_not_refitted(rng, monkeypatch):
+    """At a step where a refit is due the convergence check comes first: a refit restarts the
+    judged chain, and would throw away one that has already converged.  Exact proposal on a
+    Gaussian (tau ~ 2) with refits forced (TAU_KEEP = 0) at step 300: converged there, where
+    checking after the refit ran to 600 steps."""
+    monkeypatch.setattr(sampling, "TAU_KEEP", 0.0)
+    monkeypatch.setattr(sampling, "ADAPT_FIRST", 300)
+    target = _Gaussian(seed=1)
+    exact = MixtureT([1.0], target.mean[None], target.cov[None])
+    run = run_emcee(target, exact.draw(rng, 32), rng, proposal=exact, check_every=300)
+    assert run.converged and run.n_steps == 300
+    assert run.adaptation == () and run.burn < 300
