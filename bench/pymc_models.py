@@ -29,6 +29,7 @@ scipy's to ~1e-16 rather than ~1e-9).
 import math
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -353,6 +354,14 @@ def check_pymc(post, model=None, n=20, rng=None, theta=None, rows="all"):
             "logp_range": (float(ref.min()), float(ref.max())), "grad_finite": True}
 
 
+def _compile_cache_files():
+    """Files in pytensor's compile cache (C and numba): it grows when a run compiles afresh
+    (the first run of a model in an environment took 1.2-2.9x as long as later ones: bench/README.md)."""
+    import pytensor
+
+    return sum(1 for _ in Path(pytensor.config.compiledir).parent.rglob("*"))
+
+
 def run_pymc(post, seed, draws=1000, tune=1000, chains=2, cores=2, attempts=2, rows="all"):
     """PyMC NUTS on ``post``'s model, likelihood and priors (:func:`build_pymc`).
 
@@ -365,6 +374,7 @@ def run_pymc(post, seed, draws=1000, tune=1000, chains=2, cores=2, attempts=2, r
     import pymc as pm
 
     wall, evals, divergences, ess, rhat, runs = 0.0, 0, 0, 0.0, np.inf, []
+    cached = _compile_cache_files()
     with PeakRSS() as mem:
         for attempt in range(attempts):
             t0 = time.perf_counter()
@@ -387,8 +397,9 @@ def run_pymc(post, seed, draws=1000, tune=1000, chains=2, cores=2, attempts=2, r
             if ess >= 400 and rhat <= 1.01:
                 break
             draws = int(min(4000, math.ceil(1.5 * draws * 400 / max(ess, 20))))
+    grown = _compile_cache_files() - cached
     note = (f"chains={chains} cores={cores}, tune={tune}, rows={rows}; runs: {'; '.join(runs)}; "
-            f"{divergences} divergences; "
+            f"{divergences} divergences; compile cache {'cold (' + str(grown) + ' files added)' if grown else 'warm'}; "
             "evaluations = leapfrog steps (gradient+log-density) of kept draws; RSS growth excludes worker processes")
     return Result("PyMC NUTS", wall, ess, rhat, evals, mem.mb, note,
                   extra={"divergences": divergences, "runs": runs, "tree": tree})
