@@ -53,9 +53,10 @@ def _observe(coef, x):
     ok = (m > 0) & (n > 0) & positive
     area = np.atleast_2d(np.exp(log_a + m * log_f))
     impedance = np.atleast_2d(np.exp(log_b + n * log_f))
-    shape = np.broadcast_shapes(area.shape, impedance.shape)
-    return ({"contact_area": np.broadcast_to(area, shape), "impedance": np.broadcast_to(impedance, shape)},
-            ok)
+    if area.shape != impedance.shape:  # one of them not varying with the ensemble
+        shape = np.broadcast_shapes(area.shape, impedance.shape)
+        area, impedance = np.broadcast_to(area, shape), np.broadcast_to(impedance, shape)
+    return {"contact_area": area, "impedance": impedance}, ok
 
 
 def area_impedance_law(log_alpha_a, m, log_beta_z, n_z):
