@@ -17,7 +17,9 @@ How a fit samples (:func:`skinfit.fit.start`, :func:`importance_start`, :func:`r
    (Tried and not adopted, 4 seeds each: up to 10 components, and keeping a chain that needs
    fewer further steps than a restarted one, both within the seed-to-seed spread on textured
    and ultrasonic; independence moves alone, 25-40% fewer steps on textured and contact_area
-   but one ultrasonic fit of 4171 steps against at most 1600.)
+   but one ultrasonic fit of 4171 steps against at most 1600; a defensive component (10%,
+   twice the chain's spread), ultrasonic mean 1229 -> 1838 steps over 6 seeds; 16 walkers
+   instead of 32, more steps on every model and no faster.)
 
 Measured on the five shipped posteriors (5 seeds each, this 2-CPU machine; bench/results/):
 the largest integrated autocorrelation time fell from 23-69 steps (DE and snooker moves,
