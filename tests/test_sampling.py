@@ -126,7 +126,7 @@ def test_a_chain_converged_at_a_refit_step_is_kept_not_refitted(rng, monkeypatch
     """At a step where a refit is due the convergence check comes first: a refit restarts the
     judged chain, and would throw away one that has already converged.  Exact proposal on a
     Gaussian (tau ~ 2) with refits forced (TAU_KEEP = 0) at step 300: converged there, where
-    checking after the refit ran to 600 steps."""
+    checking after the refit ran to 900 steps (refits at 300 and 600)."""
     monkeypatch.setattr(sampling, "TAU_KEEP", 0.0)
     monkeypatch.setattr(sampling, "ADAPT_FIRST", 300)
     target = _Gaussian(seed=1)
