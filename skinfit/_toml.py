@@ -71,6 +71,10 @@ def find_file(kind, name, suffix=".toml"):
     if candidate.exists():
         return candidate
     known = sorted(available(kind))
+    if not (ROOT / kind).is_dir():  # e.g. a non-editable install: the shipped cards stay in the checkout
+        raise InputError(name, f"no such {kind[:-1]}: there is no {ROOT / kind} with the shipped {kind} "
+                               "(skinfit reads them from the checkout it is installed from: install it with "
+                               "`pip install -e <checkout>`, or set SKINFIT_HOME to the checkout)")
     raise InputError(name, f"no such {kind[:-1]} (known: {', '.join(known) or 'none'})")
 
 

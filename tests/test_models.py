@@ -56,6 +56,18 @@ def test_unknown_model_lists_known():
         skinfit.load_model("nope")
 
 
+def test_missing_shipped_cards_say_where_they_were_looked_for(tmp_path, monkeypatch):
+    """Installed without the checkout (a non-editable install), the shipped cards are not
+    found: the error names the folder searched and the two remedies, not an empty list."""
+    import skinfit._toml
+
+    monkeypatch.setattr(skinfit._toml, "ROOT", tmp_path)
+    for load, kind in ((skinfit.load_model, "models"), (skinfit.load_priors, "priors"),
+                       (skinfit.load_dataset, "datasets")):
+        with pytest.raises(skinfit.InputError, match=f"there is no {tmp_path / kind}.*SKINFIT_HOME"):
+            load("electroadhesion")
+
+
 def test_sampling_linear_keeps_natural_coordinates(tmp_path):
     """`[sampling] linear` samples positive parameters in natural units (the empirical power law's
     b + d ridge is straight there); an unknown name is refused."""
