@@ -437,8 +437,8 @@ class Posterior:
         For the result tree of a fit (thousands of draws x every row): evaluated in blocks of
         :attr:`BLOCK_CELLS` (draw, row) cells that stay in cache, writing straight into the two
         outputs, with no (draws, rows) prediction arrays (contact_area, 3880 draws x 1638 rows
-        x 2 observables: 0.36-0.56 s -> 0.23 s, of which 0.13 s are the normal draws; a third less memory).  Rows of ``theta`` outside the physical
-        support raise ``ValueError``.
+        x 2 observables: 0.36-0.56 s -> 0.23 s, of which 0.13 s are the normal draws; a third
+        less memory).  Rows of ``theta`` outside the physical support raise ``ValueError``.
         """
         theta = np.atleast_2d(theta)
         k = len(theta)
