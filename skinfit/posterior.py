@@ -73,6 +73,13 @@ def _transform_for(prior, linear=False):
     return "log" if prior.lower >= 0 and not linear else "identity"
 
 
+def _take(theta, j):
+    """A parameter's values in ``theta`` (k, d), from its index ``j`` (an entry of
+    ``Posterior._param_index``): (k, 1) for a column, (k, n) for a per-row gather index (a
+    parameter split by a grouping column)."""
+    return theta[:, j:j + 1] if isinstance(j, int) else theta[:, j]
+
+
 class Posterior:
     """log p(z | data) for an ensemble of walkers, with everything needed to build it.
 
@@ -308,8 +315,7 @@ class Posterior:
     def unpack(self, theta):
         """Mapping parameter -> (k, 1) or (k, n) array for the forward function."""
         theta = np.atleast_2d(theta)
-        return {p: theta[:, idx:idx + 1] if isinstance(idx, int) else theta[:, idx]
-                for p, idx in self._param_index.items()}
+        return {p: _take(theta, j) for p, j in self._param_index.items()}
 
     def log_prior(self, theta):
         """Normalised log prior, (k,): one vectorised closed form per distribution family."""
@@ -351,7 +357,7 @@ class Posterior:
         """
         theta = np.atleast_2d(theta)
         k = len(theta)
-        params = {p: theta[:, j:j + 1] if isinstance(j, int) else theta[:, j] for p, j in self._param_index_u.items()}
+        params = {p: _take(theta, j) for p, j in self._param_index_u.items()}
         pred_u, ok = self.model.forward(params, self._xu, self.constants)
         ok = np.asarray(ok)
         valid = ok.all(axis=-1) if ok.ndim == 2 else np.full(k, bool(ok.all()) if ok.ndim else bool(ok))
@@ -360,7 +366,7 @@ class Posterior:
         ll, pred = {}, {}
         with np.errstate(divide="ignore", invalid="ignore"):  # once: entering it costs ~7 us
             for o in self.observables:
-                suffix = "" if len(self.observables) == 1 else f"_{o}"
+                suffix = self._suffix(o)
                 mu_u = pred_u[o]
                 if mu_u.shape != (k, self.n_unique):
                     mu_u = np.broadcast_to(mu_u, (k, self.n_unique))
@@ -376,8 +382,7 @@ class Posterior:
                                  else (self._counts * np.log(sigma)).sum(axis=1))
                     ll[o] = -0.5 * ss - log_sigma - 0.5 * self.n * _LOG_2PI - self._sum_logy.get(o, 0.0)
                 else:
-                    sigma = theta[:, self._param_index[f"sigma{suffix}"]]
-                    sigma = sigma[:, None] if sigma.ndim == 1 else sigma
+                    sigma = _take(theta, self._param_index[f"sigma{suffix}"])
                     if noise == "lognormal":  # the log on distinct rows, then to every row
                         r = np.log(mu_u)[:, self._inverse]
                         np.subtract(self._logy[o], r, out=r)
@@ -385,8 +390,7 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
-                        nu = theta[:, self._param_index[f"nu{suffix}"]]
-                        nu = nu[:, None] if nu.ndim == 1 else nu
+                        nu = _take(theta, self._param_index[f"nu{suffix}"])
                         value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
                                  - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))
                     else:
@@ -469,8 +473,8 @@ class Posterior:
         out = {}
         for o in self.observables:
             if self.noise[o] == "student_t":
-                nu = theta[:, self._param_index[f"nu{self._suffix(o)}"]]
-                out[o] = rng.standard_t(np.broadcast_to(nu[:, None] if nu.ndim == 1 else nu, (len(theta), self.n)))
+                nu = _take(theta, self._param_index[f"nu{self._suffix(o)}"])
+                out[o] = rng.standard_t(np.broadcast_to(nu, (len(theta), self.n)))
             else:
                 out[o] = rng.standard_normal((len(theta), self.n))
         return out
@@ -478,8 +482,7 @@ class Posterior:
     def _observe(self, eps, mu, theta, o):
         """Standardised noise ``eps`` (k, n) turned into observations around predictions ``mu``
         of parameter vectors ``theta``, in place (these are (draws, rows) arrays)."""
-        sigma = theta[:, self._param_index[f"sigma{self._suffix(o)}"]]
-        eps *= sigma[:, None] if sigma.ndim == 1 else sigma
+        eps *= _take(theta, self._param_index[f"sigma{self._suffix(o)}"])
         if self.noise[o] == "lognormal":
             np.exp(eps, out=eps)
             eps *= mu

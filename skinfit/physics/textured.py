@@ -77,13 +77,15 @@ def contact_state(p, x, c, *, transition=True, pressures=True):
         frac = np.clip(1.0 - s * s, 0.0, 1.0)  # eq. 9
     else:
         frac = np.zeros(np.broadcast_shapes(np.shape(pbar), np.shape(e1)))
-    if flat.any():
+    any_flat = flat.any()  # the np.where passes only where a flat reference exists
+    if any_flat:
         frac = np.where(flat, 0.0, frac)
     one_minus = 1.0 - frac
     p_asp = pbar * np.sqrt(one_minus)  # eq. 12
     a_i = np.cbrt(p_asp * (0.75 * lam2 * r_asp) / e1)  # Hertz radius of one asperity contact
     cell = np.minimum(1.0, a_i * a_i * (np.pi / lam2))
-    a_r = a_ac * (np.where(flat, 1.0, frac + one_minus * cell) if flat.any() else frac + one_minus * cell)
+    share = frac + one_minus * cell  # real area / apparent area
+    a_r = a_ac * (np.where(flat, 1.0, share) if any_flat else share)
     out = {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_asp": p_asp, "A_r": a_r, "flat": flat, "ok": ok}
     if pressures:
         with np.errstate(divide="ignore", invalid="ignore"):
