@@ -11,7 +11,7 @@ from functools import cached_property
 from types import MappingProxyType
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError
@@ -70,6 +70,10 @@ class Prior:
         hi = f.logcdf(self.upper) if np.isfinite(self.upper) else 0.0
         if hi - lo < 1e-12:  # both in one tail: use survival functions
             lo, hi = f.logsf(self.upper), f.logsf(self.lower)
+        if hi - lo < 1e-12:  # bounds narrow beside the spread: the density is flat there (Simpson)
+            a, b = self.lower, self.upper
+            return float(special.logsumexp(f.logpdf([a, 0.5 * (a + b), b]), b=[1.0, 4.0, 1.0])
+                         + math.log((b - a) / 6.0))
         return float(hi + math.log1p(-math.exp(lo - hi)) if np.isfinite(lo) else hi)
 
     def logpdf(self, x):

@@ -89,3 +89,20 @@ def test_missing_prior_refused_before_sampling(tmp_path):
     path.write_text(text[:start] + text[end:])
     with pytest.raises(skinfit.InputError, match=r"ea.toml: no prior for eta"):
         skinfit.fit("electroadhesion", "electroadhesion_synthetic", priors=skinfit.load_priors(str(path)), rng=0)
+
+
+@pytest.mark.parametrize("spec", [
+    {"dist": "normal", "loc": 0.5, "scale": 1.078e16, "bounds": [0.0, 2.0]},  # found by the fuzz test
+    {"dist": "normal", "loc": 0.5, "scale": 1e13, "bounds": [0.0, 2.0]},
+])
+def test_mass_of_bounds_narrow_beside_a_wide_prior(spec):
+    """Bounds so narrow beside the prior's spread that its CDF cannot tell them apart (both
+    ends read 0.5 to within 1e-12, where the CDF difference was 0 and gave a math domain
+    error): the mass inside is width x density, 2 / (scale sqrt(2 pi)) (the density varies by
+    (1.5 / scale)^2 across the bounds), and the truncated log-density is -log(2), that of the
+    uniform it has become."""
+    prior = parse_prior("mu", {**spec, "source": "test"}, "t")
+    scale = spec["scale"]
+    expected = math.log(2.0 / (scale * math.sqrt(2 * math.pi)))
+    assert prior.log_mass == pytest.approx(expected, rel=1e-12)
+    np.testing.assert_allclose(prior.logpdf(np.array([0.0, 1.0, 2.0])), -math.log(2.0), rtol=1e-12)
