@@ -417,16 +417,15 @@ class Posterior:
         return ({o: np.broadcast_to(v, (k, self.n)) for o, v in ll.items()},
                 {o: np.broadcast_to(v, (k, self.n)) for o, v in pred.items()}, valid)
 
-    def simulate(self, theta, rng, predictions=None):
+    def simulate(self, theta, rng):
         """Simulated observations at each parameter vector: dict observable -> (k, n).
 
         The model's prediction plus a draw of its noise model (normal, Student-t, log-normal).
-        ``predictions``: the (predictions, validity) :meth:`pointwise` returned for ``theta``,
-        to spare a second forward evaluation.  Rows of ``theta`` outside the physical support
-        raise ``ValueError``.
+        Rows of ``theta`` outside the physical support raise ``ValueError``.  (A fit's result
+        tree uses :meth:`replicate`, which also returns the pointwise log-likelihood.)
         """
         theta = np.atleast_2d(theta)
-        _, pred, valid = (None, *predictions) if predictions is not None else self._evaluate(theta, False)
+        _, pred, valid = self._evaluate(theta, False)
         self._require_valid(valid)
         out = self._noise(theta, rng)
         for o, eps in out.items():
