@@ -65,22 +65,25 @@ def _first_draw(fit):
     return np.stack(cols, axis=-1)
 
 
-def _carried_rows(name, args):
-    """Table rows of the methods skipped in this run, from the last results file (marked with
-    its date; their 'x skinfit' column is relative to that run's skinfit)."""
-    path = RESULTS / f"{name}.md"
-    if not path.exists():
-        return ""
-    text = path.read_text()
-    date = text.split("` - ", 1)[1].split("\n", 1)[0] if "` - " in text else "an earlier run"
-    skipped = [m for m, flag in (("plain", args.skip_plain), ("dynesty", args.skip_dynesty), ("PyMC", args.skip_pymc))
-               if flag]
-    rows = [line for line in text.splitlines() if any(line.startswith(f"| {m}") for m in skipped)]
-    return "".join(f"\n{line.rstrip(' |')} (not rerun: run of {date}) |" if "(not rerun" not in line else f"\n{line}"
-                   for line in rows)
+#: the compared methods' keys in results.json, and the first word of their table rows
+COMPARED = {"plain": "plain", "dynesty": "dynesty", "pymc": "PyMC"}
 
 
-def bench(name, args):
+def _carry(summary, old):
+    """Give ``summary`` the last run's figures (``old``, its results.json entry) of every
+    compared method this run skipped, dated; returns their table rows, marked (their
+    'x skinfit' column is relative to that run's skinfit)."""
+    rows = []
+    for key in COMPARED:
+        if summary.get(f"{key}_s") is None and old.get(f"{key}_s") is not None:
+            summary.update({k: v for k, v in old.items() if k.startswith(f"{key}_")})
+            summary.setdefault(f"{key}_carried", old["date"])
+            if f"{key}_row" in old:
+                rows.append(old[f"{key}_row"].rstrip(" |") + f" (not rerun: run of {summary[f'{key}_carried']}) |")
+    return "".join("\n" + r for r in rows)
+
+
+def bench(name, args, old):
     model, data, prior_id = POSTERIORS[name]
     priors = skinfit.load_priors(prior_id)
     loaded = skinfit.load_model(model), skinfit.load_dataset(data)
@@ -131,6 +134,7 @@ def bench(name, args):
                       run_bare_emcee(loaded[0], loaded[1], priors, args.seed, again.extra["sampler"]).wall_s))
         del again
     to_samples, with_tree, bare_s = (min(p[i] for p in pairs) for i in range(3))
+    table_lines = table(rows).split("\n")
     summary = {
         "posterior": name, "rows": post.n, "distinct_rows": post.n_unique, "parameters": post.ndim,
         "skinfit_s": sk.wall_s, "skinfit_tree_s": t["tree_s"], "skinfit_converged": sk.converged,
@@ -138,18 +142,15 @@ def bench(name, args):
         "bare_s": bare_s, "overhead_total": with_tree / bare_s - 1, "overhead_to_samples": to_samples / bare_s - 1,
         "overhead_pairs": [a / c - 1 for a, _, c in pairs],
         "same_chain": same,
-        "plain_s": found["plain"].wall_s if "plain" in found else None,
-        "plain_converged": found["plain"].converged if "plain" in found else None,
-        "dynesty_s": found["dynesty"].wall_s if "dynesty" in found else None,
-        "dynesty_converged": found["dynesty"].converged if "dynesty" in found else None,
-        "dynesty_note": found["dynesty"].note if "dynesty" in found else None,
-        "pymc_s": found["PyMC"].wall_s if "PyMC" in found else None,
-        "pymc_converged": found["PyMC"].converged if "PyMC" in found else None,
+        **{f"{key}_{field}": getattr(found[m], attr) if m in found else None for key, m in COMPARED.items()
+           for field, attr in (("s", "wall_s"), ("converged", "converged"), ("note", "note"))},
+        **{f"{key}_row": table_lines[2 + rows.index(found[m])] for key, m in COMPARED.items() if m in found},
         "fused_ratio": [b / a for _, a, b in thr],
         "seeds_median_s": float(np.median(walls)), "seeds_min_s": float(walls.min()), "seeds_max_s": float(walls.max()),
         "seeds_converged": sum(r.converged for r in per_seed), "seeds": len(per_seed),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
     }
+    carried = _carry(summary, old)
     lines = [f"# {name}: {model} on {data} ({post.n} rows, {post.n_unique} distinct; {post.ndim} sampled parameters; "
              f"priors {Path(prior_id).name if prior_id.endswith('.toml') else 'priors/' + prior_id + '.toml'})", "",
              f"`.venv/bin/python bench/bench_models.py --models {name} --seed {args.seed} --repeats {args.repeats} --pairs {args.pairs}"
@@ -159,7 +160,7 @@ def bench(name, args):
              "chains; dynesty: Kish ESS of its weights, R-hat over 4 random quarters of its equal-weight resample). "
              "Wall time includes the MAP search (emcee methods), compilation (PyMC) and the full result tree "
              "(skinfit). One process, one run, methods one after another; every library imported and a short "
-             "untimed fit run first.", "", table(rows) + _carried_rows(name, args), "",
+             "untimed fit run first.", "", "\n".join(table_lines) + carried, "",
              "## Log-density throughput (evaluations/s; same posterior draws, values checked equal)", "",
              "| walkers | skinfit `Posterior.__call__` | one fused numpy expression | fused / skinfit |",
              "|---|---|---|---|"]
@@ -254,15 +255,7 @@ def main():
     store = RESULTS / "results.json"
     results = json.loads(store.read_text()) if store.exists() else {}
     for name in args.models:
-        new = bench(name, args)
-        old = results.get(name, {})
-        for method in ("plain", "dynesty", "pymc"):  # a skipped method keeps its last run, marked
-            if new.get(f"{method}_s") is None and old.get(f"{method}_s") is not None:
-                for key, value in old.items():
-                    if key.startswith(f"{method}_"):
-                        new[key] = value
-                new.setdefault(f"{method}_carried", old.get(f"{method}_carried", old["date"]))
-        results[name] = new
+        results[name] = bench(name, args, results.get(name, {}))  # skipped methods keep their last run
         results = {k: results[k] for k in POSTERIORS if k in results}
         store.write_text(json.dumps(results, indent=1) + "\n")
         write_summary(results, machine_info())
