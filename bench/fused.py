@@ -156,7 +156,9 @@ def _electroadhesion(post):
 def _textured_surface(post):
     """Distinct rows, textured first, flat references after (their real area is the apparent area)."""
     _expect(post, ("E_skin_micro", "E_fingerpad", "tau0", "alpha", "beta_h", "k_a", "m_a", "sigma"),
-            ["log"] * 8, {"friction_coefficient": "normal"})
+            ["log", "log", "log", "identity", "product", "log", "log", "log"], {"friction_coefficient": "normal"})
+    (j, partners, powers), = post._product
+    assert j == 4 and list(partners) == [1] and np.allclose(powers, [-1.0 / 3.0])
     c = post.constants
     xu, cnt, stats = _distinct(post)
     ybar, ssw = stats["friction_coefficient"]
@@ -180,6 +182,8 @@ def _textured_surface(post):
 
     def fused(z):
         theta = np.exp(z)
+        theta[:, 3] = z[:, 3]  # alpha in natural units
+        theta[:, 4] = z[:, 4] * np.cbrt(theta[:, 1])  # z = beta_h * E_fingerpad^(-1/3)
         e_micro, e_pad, tau0, alpha, beta_h, k_a, m_a, sigma = theta.T[:, :, None]
         e1 = 1.0 / (cs / e_micro + cm[:nt])
         a_ac = k_a * np.exp(m_a * logf)
@@ -195,7 +199,8 @@ def _textured_surface(post):
         d = ybar - mu
         ss = (ssw + (cnt * d * d).sum(axis=1)) / (sigma[:, 0] * sigma[:, 0])
         ok = ((theta >= lo) & (theta <= hi)).all(axis=1) & valid
-        return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 7] + z.sum(axis=1), -np.inf)
+        log_jac = z.sum(axis=1) - z[:, 3] - z[:, 4] + z[:, 1] / 3.0
+        return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 7] + log_jac, -np.inf)
 
     return fused
 
@@ -309,7 +314,8 @@ def _bracket_series(s):
 def _ultrasonic(post):
     """Period average over fixed nodes (they depend only on the covariates) of the distinct
     rows, one flat node axis."""
-    _expect(post, ("mu_inf", "mu_0", "k_V", "q", "V0", "sigma"), ["log"] * 6, {"friction_coefficient": "normal"})
+    _expect(post, ("mu_inf", "mu_0", "k_V", "q", "V0", "sigma"), ["log", "identity", "log", "log", "log", "log"],
+            {"friction_coefficient": "normal"})
     xu, cnt, stats = _distinct(post)
     ybar, ssw = stats["friction_coefficient"]
     speed, weight, start = ultrasonic_nodes(xu)
@@ -323,6 +329,7 @@ def _ultrasonic(post):
 
     def fused(z):
         theta = np.exp(z)
+        theta[:, 1] = z[:, 1]  # mu_0 in natural units
         mu_inf, mu_0, k_v, q, v0, sigma = theta.T[:, :, None]
         u = v0 * inv
         e = np.exp(-u)
@@ -334,7 +341,7 @@ def _ultrasonic(post):
         d = ybar - np.add.reduceat(mu_e * weight, start, axis=1)
         ss = (ssw + (cnt * d * d).sum(axis=1)) / (sigma[:, 0] * sigma[:, 0])
         ok = (2.0 * mu_inf[:, 0] - mu_0[:, 0] > 0.0) & ((theta >= lo) & (theta <= hi)).all(axis=1)
-        return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 5] + z.sum(axis=1), -np.inf)
+        return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 5] + z.sum(axis=1) - z[:, 1], -np.inf)
 
     return fused
 

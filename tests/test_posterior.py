@@ -1,5 +1,6 @@
 """The posterior's coordinate maps: exact round trips and the Jacobian it claims."""
 
+import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -7,17 +8,45 @@ import pytest
 from scipy import stats
 
 import skinfit
+from skinfit.optimize import find_map
 from skinfit.posterior import Posterior
 
 
-@pytest.fixture(scope="module")
-def post():
-    return Posterior(skinfit.load_model("electroadhesion"), skinfit.load_priors("electroadhesion"),
-                     skinfit.load_dataset("electroadhesion_synthetic"))
+#: Every card with a ``[sampling]`` table, on its shipped data set.
+DECLARED = {"electroadhesion": "electroadhesion_synthetic", "electroadhesion_empirical": "electroadhesion_synthetic",
+            "textured_surface": "textured_synthetic", "textured_no_transition": "textured_synthetic",
+            "ultrasonic": "ultrasonic_synthetic"}
 
 
-def test_shear_declared_and_round_trip(post, rng):
-    assert post._shear, "the electroadhesion card declares a (phi, d_air) shear"
+def _posterior(model):
+    return Posterior(skinfit.load_model(model), skinfit.load_priors(model), skinfit.load_dataset(DECLARED[model]))
+
+
+@pytest.fixture(scope="module", params=sorted(DECLARED))
+def post(request):
+    return _posterior(request.param)
+
+
+def test_every_card_with_sampling_coordinates_is_covered():
+    declared = {m for m in skinfit.list_models()
+                if (c := skinfit.load_model(m)).shear or c.shift or c.product or c.linear}
+    assert declared == set(DECLARED)
+
+
+@pytest.mark.parametrize("model, transforms", [
+    ("electroadhesion", {"phi": "log", "d_air": "shift_log", "beta0": "product"}),
+    ("textured_surface", {"alpha": "identity", "beta_h": "product", "E_fingerpad": "log"}),
+    ("ultrasonic", {"mu_0": "identity", "q": "log"}),
+])
+def test_declared_coordinates_take_effect(model, transforms):
+    post = _posterior(model)
+    got = {s.name: s.transform for s in post.slots}
+    assert {p: got[p] for p in transforms} == transforms
+    if model == "electroadhesion":
+        assert [post.slots[j].base for j, _ in post._shear] == ["phi"]
+
+
+def test_round_trip(post, rng):
     theta = post.sample_prior(50, rng)
     np.testing.assert_allclose(post.to_theta(post.to_z(theta)), theta, rtol=1e-13)
 
@@ -25,12 +54,12 @@ def test_shear_declared_and_round_trip(post, rng):
 def test_log_jacobian_matches_numerical_determinant(post, rng):
     for theta in post.sample_prior(5, rng):
         z = post.to_z(theta[None])[0]
-        h = 1e-6
+        h = 1e-6 * np.maximum(1.0, np.abs(z))
         jac = np.empty((post.ndim, post.ndim))
         for i in range(post.ndim):
             e = np.zeros(post.ndim)
-            e[i] = h
-            jac[:, i] = (post.to_theta((z + e)[None])[0] - post.to_theta((z - e)[None])[0]) / (2 * h)
+            e[i] = h[i]
+            jac[:, i] = (post.to_theta((z + e)[None])[0] - post.to_theta((z - e)[None])[0]) / (2 * h[i])
         sign, logdet = np.linalg.slogdet(jac)
         assert sign > 0
         assert post.log_jacobian(z[None])[0] == pytest.approx(logdet, abs=1e-6)
@@ -39,6 +68,26 @@ def test_log_jacobian_matches_numerical_determinant(post, rng):
 def test_call_equals_density_plus_jacobian(post, rng):
     z = post.to_z(post.sample_prior(20, rng))
     np.testing.assert_allclose(post(z), post.log_density(post.to_theta(z)) + post.log_jacobian(z), rtol=1e-12)
+
+
+@pytest.mark.parametrize("model, data", [("electroadhesion", "electroadhesion_synthetic"),
+                                         ("textured_surface", "textured_synthetic"),
+                                         ("contact_area", "contact_area_synthetic"),
+                                         ("wavy_surface", "wavy_synthetic"),
+                                         ("ultrasonic", "ultrasonic_synthetic")])
+def test_posterior_equals_the_hand_fused_expression(model, data, rng):
+    """An independent evaluation of the log posterior in the sampling coordinates, Jacobian
+    written out by hand (bench/fused.py, the throughput floor of issue 7), at prior draws
+    and points near the MAP: equal to 1e-10 relative, with the same -inf pattern."""
+    spec = importlib.util.spec_from_file_location("fused", Path(__file__).parents[1] / "bench" / "fused.py")
+    fused = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fused)
+    post = Posterior(skinfit.load_model(model), skinfit.load_priors(model), skinfit.load_dataset(data))
+    z = post.to_z(post.sample_prior(48, rng))
+    z_map = post.to_z(find_map(post, rng, n_global=500, n_local=1).theta[None])
+    z = np.concatenate([z, z_map + 0.01 * rng.standard_normal((16, post.ndim))])
+    result = fused.check_fused(post, fused.make_fused(post), z)
+    assert result["finite"] >= 16
 
 
 def test_new_coordinates_are_finite_at_a_zero_bound_and_exact(rng):
