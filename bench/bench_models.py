@@ -206,7 +206,7 @@ def write_summary(results, info):
         mark = "" if conv is None or r.get(conv) is not False else ", NOT converged"
         carried = r.get(key.replace("_s", "_carried"))
         mark += f"; run of {carried}" if carried else ""
-        return f"{v:.1f} ({v / r['skinfit_s']:.0f}x{mark})"
+        return f"{v:.1f} ({v / r['skinfit_s']:.3g}x{mark})"  # 3 digits: 19.8x is not 20x
 
     for r in results.values():
         lines.append(f"| {r['posterior']} | {r['rows']} ({r['distinct_rows']}), {r['parameters']} | {r['skinfit_s']:.2f} | "
