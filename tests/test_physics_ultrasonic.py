@@ -221,3 +221,38 @@ def test_support_is_a_positive_friction_factor(name):
     y, ok = getattr(us, name)(p, _x([0.02, 0.14], amp=1.6e-6), {})
     assert np.array_equal(np.broadcast_to(ok, (2, 2)), [[True, True], [False, False]])
     assert np.all(np.isfinite(y["friction_coefficient"]))
+
+
+@pytest.mark.parametrize("block_cells", [10**9, 500])
+def test_flat_blocked_average_equals_the_reference_quadrature(block_cells, monkeypatch, rng):
+    """The models' period average (nodes of all rows on one axis, cached, parameter vectors in
+    blocks) equals period_average of mu_equilibrium on (k, rows, nodes) arrays, for the three
+    variants; parameters shared (k, 1), per row (k, n) (a split parameter) and single (1, 1)
+    mixed; rows at rest, without vibration, along and across the vibration axis."""
+    monkeypatch.setattr(us, "BLOCK_CELLS", block_cells)
+    n, k = 40, 7
+    x = {"velocity": rng.uniform(0.0, 0.14, n), "direction_angle": rng.choice([0.0, 0.01, 0.7, math.pi / 2, math.pi], n),
+         "amplitude_pp": rng.choice([0.0, 0.4e-6, 1.6e-6], n), "frequency": np.full(n, 58e3)}
+    x["velocity"][:3], x["amplitude_pp"][:3], x["amplitude_pp"][3:6] = 0.0, 0.0, 1.6e-6
+    p = {"mu_inf": rng.uniform(1.0, 3.0, (k, 1)), "mu_0": rng.uniform(0.01, 0.9, (k, n)), "k_V": np.array([[0.0048]]),
+         "q": rng.uniform(0.001, 0.1, (k, 1)), "V0": rng.uniform(0.02, 0.2, (k, 1)), "mu_plus": rng.uniform(1.0, 2.0, (k, n))}
+    ux, uy = np.cos(x["direction_angle"]), np.sin(x["direction_angle"])
+    e = {name: v[..., None] for name, v in p.items()}
+
+    def reference(speed, vx, vy, rows, constant=False, projected=False):
+        star = e["mu_plus"][:, rows] if constant else us.mu_speed(speed, e["mu_inf"], e["mu_0"][:, rows], e["k_V"])
+        mu = us.mu_equilibrium(speed, star, e["q"], e["V0"])
+        if projected:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mu = mu * np.where(speed > 0, (vx * ux[rows, None] + vy * uy[rows, None]) / speed, 0.0)
+        return mu
+
+    args = (x["velocity"], x["direction_angle"], x["amplitude_pp"], x["frequency"])
+    for f, kw in ((us.ultrasonic, {}), (us.ultrasonic_projected, {"projected": True}),
+                  (us.ultrasonic_constant_mu, {"constant": True})):
+        want = us.period_average(lambda s, vx, vy, rows: reference(s, vx, vy, rows, **kw), *args)
+        got = f(p, x, {})[0]["friction_coefficient"]
+        assert got.shape == (k, n) and np.all(np.isfinite(got))
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+        assert np.all(got[:, :3] == 0.0)  # a finger at rest on a plate at rest: mu_E(0) = 0
+        assert np.all(got[:, 3:6] != 0.0)
