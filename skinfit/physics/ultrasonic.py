@@ -46,9 +46,13 @@ def _bracket(u, e):
         out = np.asarray((1.0 - e) / u - e)  # 1 - e loses < 1e-14 relative for u >= 1e-2
     small = u < 1e-2
     if small.any():
-        s = u[small]  # sum_j (-1)^(j+1) j u^j/(j+1)!, to j = 6
-        out[small] = s * (1 / 2 - s * (1 / 3 - s * (1 / 8 - s * (1 / 30 - s * (1 / 144 - s / 840)))))
+        out[small] = _bracket_series(u[small])
     return out
+
+
+def _bracket_series(s):
+    """The bracket for small ``s = 1/Vs``: sum_j (-1)^(j+1) j s^j/(j+1)!, to j = 6."""
+    return s * (1 / 2 - s * (1 / 3 - s * (1 / 8 - s * (1 / 30 - s * (1 / 144 - s / 840)))))
 
 
 def mu_equilibrium(v, mu_star, q, v0):
@@ -195,8 +199,7 @@ def _mu_e_nodes(inv_v, v2, p, k, mu_plus=None):
     value -= e
     small = u < 1e-2
     if small.any():
-        s = u[small]
-        value[small] = s * (1 / 2 - s * (1 / 3 - s * (1 / 8 - s * (1 / 30 - s * (1 / 144 - s / 840)))))
+        value[small] = _bracket_series(u[small])
     if mu_plus is None:
         star = np.multiply(v2, -1.0 / p["k_V"], out=np.empty_like(u))
         np.maximum(star, _EXP_FLOOR, out=star)
