@@ -13,6 +13,8 @@ by design) and ``A_r = A_ac``.
 
 import numpy as np
 
+from ._cache import by_value
+
 __all__ = [
     "reduced_modulus",
     "critical_load",
@@ -56,49 +58,59 @@ def contact_state(p, x, c, *, transition=True, pressures=True):
     ``transition`` is False and on a flat reference); ``p_trans``, ``p_asp`` mean pressures of
     the full-contact and asperity zones [Pa] (eqs. 11-12 in closed form: pbar*(1-(1-x)**1.5)/x
     and pbar*sqrt(1-x); p_trans = 1.5*pbar as x -> 0; omitted when ``pressures`` is False, as
-    the friction needs neither); ``A_r`` real contact area [m^2]; and ``flat`` (bool, (n,)) and
-    ``ok`` (bool, (n,): texture geometry either complete or all missing, and F > 0).
+    the friction needs neither); ``A_r`` real contact area [m^2]; and, each (n,) and read-only,
+    ``flat`` (bool), ``ok`` (bool: texture geometry either complete or all missing, and F > 0),
+    ``F`` the normal force [N] (1 where F <= 0) and ``c_m`` = (1 - nu_m^2)/E_m [1/Pa].
     """
-    f = np.asarray(x["normal_force"], dtype=float)
-    geo = [np.asarray(x[k], dtype=float) for k in _TEXTURE]
-    missing = [np.isnan(g) for g in geo]
-    flat = missing[0] & missing[1] & missing[2]
-    ok = (missing[0] == missing[1]) & (missing[1] == missing[2]) & (f > 0)
-    r_asp, h, lam = (np.where(m, 1.0, g) for m, g in zip(missing, geo))  # harmless fill
-    f_safe = np.where(f > 0, f, 1.0)
-    e1 = reduced_modulus(p["E_skin_micro"], x["sample_modulus"], c)
-    a_ac = p["k_a"] * np.exp(p["m_a"] * np.log(f_safe))  # k_a*F**m_a; log F has no parameter axes
+    f_safe, log_f, flat, ok, any_flat, crit, hertz, cell_scale, c_m = _rows(
+        *(x[k] for k in ("normal_force", "sample_modulus") + _TEXTURE), scalars=(float(c["nu_m"]),))
+    e1 = 1.0 / ((1.0 - c["nu_skin"] ** 2) / p["E_skin_micro"] + c_m)  # reduced_modulus
+    a_ac = p["k_a"] * np.exp(p["m_a"] * log_f)  # k_a*F**m_a; log F has no parameter axes
     pbar = f_safe / a_ac
-    lam2 = lam**2
     if transition:
         # 2*F_crit/(3*F_i): F_crit = (4/3)*E1*sqrt(R_asp)*h**1.5 (Hertz at indentation h, eq. 13),
         # F_i = pbar*lambda**2 (mean force per asperity, eq. 6)
-        s = e1 * ((8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2) / pbar
+        s = e1 * crit / pbar
         frac = np.clip(1.0 - s * s, 0.0, 1.0)  # eq. 9
     else:
         frac = np.zeros(np.broadcast_shapes(np.shape(pbar), np.shape(e1)))
-    any_flat = flat.any()  # the np.where passes only where a flat reference exists
-    if any_flat:
+    if any_flat:  # the np.where passes only where a flat reference exists
         frac = np.where(flat, 0.0, frac)
     one_minus = 1.0 - frac
     p_asp = pbar * np.sqrt(one_minus)  # eq. 12
-    a_i = np.cbrt(p_asp * (0.75 * lam2 * r_asp) / e1)  # Hertz radius of one asperity contact
-    cell = np.minimum(1.0, a_i * a_i * (np.pi / lam2))
+    a_i = np.cbrt(p_asp * hertz / e1)  # Hertz radius of one asperity contact
+    cell = np.minimum(1.0, a_i * a_i * cell_scale)
     share = frac + one_minus * cell  # real area / apparent area
     a_r = a_ac * (np.where(flat, 1.0, share) if any_flat else share)
-    out = {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_asp": p_asp, "A_r": a_r, "flat": flat, "ok": ok}
+    out = {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_asp": p_asp, "A_r": a_r, "flat": flat, "ok": ok,
+           "F": f_safe, "c_m": c_m}
     if pressures:
         with np.errstate(divide="ignore", invalid="ignore"):
             out["p_trans"] = np.where(frac > 0, pbar * (1.0 - one_minus**1.5) / frac, 1.5 * pbar)  # eq. 11
     return out
 
 
+@by_value
+def _rows(f, sample_modulus, r_asp, h, lam, nu_m):
+    """What :func:`contact_state` needs of the covariates alone (cached by their values):
+    F (1 where F <= 0) and log F, the flat-reference and support masks, whether any row is flat,
+    the geometry factors of eqs. 9 and 12 (NaN texture filled with 1), and (1-nu_m^2)/E_m."""
+    missing = [np.isnan(g) for g in (r_asp, h, lam)]
+    flat = missing[0] & missing[1] & missing[2]
+    ok = (missing[0] == missing[1]) & (missing[1] == missing[2]) & (f > 0)
+    r_asp, h, lam = (np.where(m, 1.0, g) for m, g in zip(missing, (r_asp, h, lam)))  # harmless fill
+    f_safe = np.where(f > 0, f, 1.0)
+    lam2 = lam**2
+    return (f_safe, np.log(f_safe), flat, ok, np.asarray(flat.any()), (8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2,
+            0.75 * lam2 * r_asp, np.pi / lam2, (1.0 - nu_m**2) / sample_modulus)
+
+
 def _friction(p, x, c, *, transition, hysteresis):
     s = contact_state(p, x, c, transition=transition, pressures=False)
-    f = np.where(s["ok"], x["normal_force"], 1.0)
+    f = s["F"]
     mu = p["tau0"] * s["A_r"] / f + p["alpha"]
     if hysteresis:
-        e0 = reduced_modulus(p["E_fingerpad"], x["sample_modulus"], c)
+        e0 = 1.0 / ((1.0 - c["nu_skin"] ** 2) / p["E_fingerpad"] + s["c_m"])  # reduced_modulus
         mu = mu + p["beta_h"] * (9.0 / (128.0 * c["R_e"])) ** (2.0 / 3.0) * np.cbrt(f / e0)  # eq. 15/F
     return {"friction_coefficient": np.atleast_2d(np.where(s["ok"], mu, 0.0))}, s["ok"]
 

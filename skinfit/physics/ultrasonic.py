@@ -26,6 +26,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ._cache import by_value
+
 __all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic", "ultrasonic_projected",
            "ultrasonic_constant_mu"]
 
@@ -153,14 +155,12 @@ def _flat_nodes(x, m, projected):
     placeholder speeds; with ``projected`` the weights carry ``(v_r . u_f)/|v_r|``.  They
     depend on the covariates alone and are cached by their values.
     """
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in np.broadcast_arrays(*_rows(x))]
-    return _nodes_cached((m, projected, arrays[0].shape) + tuple(a.tobytes() for a in arrays))
+    return _nodes(*_rows(x), scalars=(m, projected))
 
 
-@lru_cache(maxsize=32)
-def _nodes_cached(key):
-    m, projected, shape = key[:3]
-    velocity, angle, amplitude_pp, frequency = (np.frombuffer(b).reshape(shape).ravel() for b in key[3:])
+@by_value
+def _nodes(velocity, angle, amplitude_pp, frequency, m, projected):
+    velocity, angle, amplitude_pp, frequency = (a.ravel() for a in (velocity, angle, amplitude_pp, frequency))
     vf_x, vy = velocity * np.cos(angle), velocity * np.sin(angle)
     amp_v = np.pi * frequency * amplitude_pp  # omega * A/2
     still = amp_v == 0
@@ -180,10 +180,7 @@ def _nodes_cached(key):
     if projected:
         along = (vx * np.repeat(np.cos(angle), counts) + vyy * np.repeat(np.sin(angle), counts)) / safe
         weight = weight * along
-    out = (1.0 / safe, np.where(moving, speed * speed, 0.0), np.where(moving, weight, 0.0), start, counts)
-    for a in out:
-        a.flags.writeable = False
-    return out
+    return 1.0 / safe, np.where(moving, speed * speed, 0.0), np.where(moving, weight, 0.0), start, counts
 
 
 def _mu_e_nodes(inv_v, v2, p, k, mu_plus=None):
