@@ -121,6 +121,17 @@ def test_vectorised_and_finite_over_prior_draws(rng):
             assert np.allclose(one, together[i], rtol=1e-13)
 
 
+def test_friction_factor_at_rest_at_its_speed_scale_and_fast():
+    """Eq. 4 as printed, mu* = mu_inf + (mu_inf - mu_0)*exp(-V^2/k_V), in closed form with the
+    paper's fit: 2*mu_inf - mu_0 = 3.564 at rest, mu_inf + (mu_inf - mu_0)/e at V = sqrt(k_V),
+    mu_inf far above it; vectorised over an ensemble (k, 1) against speeds (n,)."""
+    v = np.array([0.0, math.sqrt(PAPER["k_V"]), 10.0])
+    got = us.mu_speed(v, PAPER["mu_inf"], PAPER["mu_0"], PAPER["k_V"])
+    assert got == pytest.approx([3.564, 1.86 + 1.704 / math.e, 1.86], rel=1e-14)
+    ens = us.mu_speed(v, np.array([[1.86], [1.0]]), np.array([[0.156], [0.5]]), PAPER["k_V"])
+    assert ens.shape == (2, 3) and ens[1] == pytest.approx([1.5, 1.0 + 0.5 / math.e, 1.0], rel=1e-14)
+
+
 def test_high_speed_limit():
     """Vs -> inf (cancellation in Vs*(1 - exp(-1/Vs)) - exp(-1/Vs)): eq. 3 evaluated directly in
     exact rational arithmetic with exp(-1/Vs) from its Taylor series to 30 terms agrees to 1e-12;

@@ -16,10 +16,11 @@ nodes per piece change the average by < 1e-8 when doubled (32 would give 4e-7; t
 < 1e-6: tests/test_physics_ultrasonic.py). Off the shipped angles it is slowest near 0.01 rad,
 where v_x has a sharp minimum of width ~ v_y (1.3e-6 on doubling; 2e-7 at 0.05 rad).
 
-The models evaluate the average on the nodes of all rows flattened into one axis (cached: they
-depend on the covariates alone), in blocks of at most ``BLOCK_CELLS`` (parameter vector, node)
-cells that stay in cache; :func:`period_average` of :func:`mu_equilibrium`, on (k, rows, nodes)
-arrays, is the reference they are tested against.
+Eqs. 3-5 are each written once (:func:`_eq3`, :func:`_eq4`, :func:`_eq5`). The models evaluate
+the average on the nodes of all rows flattened into one axis (cached: they depend on the
+covariates alone), in blocks of at most ``BLOCK_CELLS`` (parameter vector, node) cells that stay
+in cache; :func:`period_average` of :func:`mu_equilibrium`, on (k, rows, nodes) arrays, is the
+reference the flat layout, the blocks and the per-row parameters are tested against.
 """
 
 from functools import lru_cache
@@ -44,8 +45,10 @@ _EXP_FLOOR = -700.0
 def _bracket(u, e):
     """``Vs*(1 - exp(-1/Vs)) - exp(-1/Vs)`` with ``u = 1/Vs``, ``e = exp(-u)``; cancellation-free
     for small u (series there)."""
+    out = np.subtract(1.0, e, out=np.empty(np.broadcast_shapes(np.shape(u), np.shape(e))))
     with np.errstate(divide="ignore", invalid="ignore"):
-        out = np.asarray((1.0 - e) / u - e)  # 1 - e loses < 1e-14 relative for u >= 1e-2
+        out /= u  # 1 - e loses < 1e-14 relative for u >= 1e-2
+    out -= e
     small = u < 1e-2
     if small.any():
         out[small] = _bracket_series(u[small])
@@ -67,17 +70,41 @@ def mu_equilibrium(v, mu_star, q, v0):
     """
     v = np.asarray(v, dtype=float)
     moving = v > 0.0
-    with np.errstate(divide="ignore"):
-        inv_v = np.where(moving, 1.0 / np.where(moving, v, 1.0), 1.0)  # no parameter axes yet
-    u = np.multiply(v0, inv_v)
-    e = np.exp(np.maximum(-u, _EXP_FLOOR))
-    value = _bracket(u, e) * mu_star * (2.0 * (np.asarray(q) + 1.0)) / ((1.0 + q) - e)
+    inv_v = 1.0 / np.where(moving, v, 1.0)  # no parameter axes yet
+    value = _eq3(inv_v, mu_star, q, v0)
     return value if moving.all() else np.where(moving, value, 0.0)
 
 
 def mu_speed(v, mu_inf, mu_0, k_v):
     """Speed-dependent friction factor mu*(V) (eq. 4 of seed 004, sign as printed)."""
-    return mu_inf + (mu_inf - mu_0) * np.exp(np.maximum(-(v**2) / k_v, _EXP_FLOOR))
+    return _eq4(np.asarray(v, dtype=float) ** 2, mu_inf, mu_0, k_v)
+
+
+def _eq3(inv_v, mu_star, q, v0):
+    """mu_E of eq. 3 from ``1/v``, computed in place on one array of the arguments' broadcast
+    shape (the flat quadrature calls it on thousands of nodes per parameter vector)."""
+    shape = np.broadcast_shapes(*(np.shape(a) for a in (inv_v, mu_star, q, v0)))
+    u = np.multiply(v0, inv_v, out=np.empty(shape))
+    e = np.negative(u, out=np.empty_like(u))
+    np.maximum(e, _EXP_FLOOR, out=e)
+    np.exp(e, out=e)
+    value = _bracket(u, e)
+    value *= mu_star
+    value *= 2.0 * (np.asarray(q) + 1.0)
+    np.subtract(1.0 + q, e, out=e)
+    value /= e
+    return value
+
+
+def _eq4(v2, mu_inf, mu_0, k_v):
+    """mu* of eq. 4 from ``v^2``, in place on one array of the arguments' broadcast shape."""
+    out = np.divide(v2, k_v, out=np.empty(np.broadcast_shapes(*(np.shape(a) for a in (v2, mu_inf, mu_0, k_v)))))
+    np.negative(out, out=out)
+    np.maximum(out, _EXP_FLOOR, out=out)
+    np.exp(out, out=out)
+    out *= mu_inf - mu_0
+    out += mu_inf
+    return out
 
 
 @lru_cache(maxsize=8)
@@ -103,6 +130,20 @@ def _phase_nodes(vf_x, vy, amp_v, m):
     return phases, weights
 
 
+def _eq5(velocity, angle, amplitude_pp, frequency, m):
+    """The relative velocity of eq. 5 at the quadrature nodes: ``(still, vf_x, vy, vx, weights)``.
+
+    ``still`` marks the rows without vibration (their speed is the finger's own, one node);
+    ``vx`` and ``weights`` (rows where the plate vibrates, 2m) sample x velocity over a period
+    at the nodes of :func:`_phase_nodes`; ``vy`` is constant over the period.
+    """
+    vf_x, vy = velocity * np.cos(angle), velocity * np.sin(angle)
+    amp_v = np.pi * frequency * amplitude_pp  # omega * A/2
+    still = amp_v == 0
+    phases, weights = _phase_nodes(vf_x[~still], vy[~still], amp_v[~still], m)
+    return still, vf_x, vy, vf_x[~still][:, None] - amp_v[~still][:, None] * np.cos(phases), weights
+
+
 def period_average(f, velocity, angle, amplitude_pp, frequency, m=PHASES):
     """Average over one vibration period of ``f(speed, v_x, v_y)`` (eq. 5 of seed 004).
 
@@ -112,26 +153,18 @@ def period_average(f, velocity, angle, amplitude_pp, frequency, m=PHASES):
     Rows without vibration need no average and get a single node.
     """
     velocity, angle, amplitude_pp, frequency = np.broadcast_arrays(velocity, angle, amplitude_pp, frequency)
-    vf_x = velocity * np.cos(angle)
-    vy = velocity * np.sin(angle)
-    amp_v = np.pi * frequency * amplitude_pp  # omega * A/2
-    still = amp_v == 0
-    parts = {}
-    for rows, nodes in ((still, 0), (~still, m)):
+    still, vf_x, vy, vx_moving, w_moving = _eq5(velocity, angle, amplitude_pp, frequency, m)
+    parts = []
+    for rows, vx, weights in ((still, vf_x[still][:, None], np.ones((int(still.sum()), 1))),
+                              (~still, vx_moving, w_moving)):
         if not rows.any():
             continue
-        if nodes:
-            phases, weights = _phase_nodes(vf_x[rows], vy[rows], amp_v[rows], nodes)
-            vx = vf_x[rows][:, None] - amp_v[rows][:, None] * np.cos(phases)
-        else:
-            weights = np.ones((int(rows.sum()), 1))
-            vx = vf_x[rows][:, None]
         vyy = np.broadcast_to(vy[rows][:, None], vx.shape)
         values = f(np.hypot(vx, vyy), vx, vyy, rows)
-        parts[nodes] = (rows, np.einsum("...rn,rn->...r", values, np.broadcast_to(weights, values.shape[-2:])))
-    lead = np.broadcast_shapes(*(v.shape[:-1] for _, v in parts.values()))
+        parts.append((rows, np.einsum("...rn,rn->...r", values, np.broadcast_to(weights, values.shape[-2:]))))
+    lead = np.broadcast_shapes(*(v.shape[:-1] for _, v in parts))
     out = np.empty(lead + velocity.shape)
-    for rows, values in parts.values():
+    for rows, values in parts:
         out[..., rows] = values
     return out
 
@@ -161,19 +194,13 @@ def _flat_nodes(x, m, projected):
 @by_value
 def _nodes(velocity, angle, amplitude_pp, frequency, m, projected):
     velocity, angle, amplitude_pp, frequency = (a.ravel() for a in (velocity, angle, amplitude_pp, frequency))
-    vf_x, vy = velocity * np.cos(angle), velocity * np.sin(angle)
-    amp_v = np.pi * frequency * amplitude_pp  # omega * A/2
-    still = amp_v == 0
+    still, vf_x, vy, vx_moving, w_moving = _eq5(velocity, angle, amplitude_pp, frequency, m)
     counts = np.where(still, 1, 2 * m)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
     vx, vyy, weight = (np.empty(int(counts.sum())) for _ in range(3))
     vx[start[still]], vyy[start[still]], weight[start[still]] = vf_x[still], vy[still], 1.0
-    if not still.all():
-        phases, w = _phase_nodes(vf_x[~still], vy[~still], amp_v[~still], m)
-        at = start[~still][:, None] + np.arange(2 * m)
-        vx[at] = vf_x[~still][:, None] - amp_v[~still][:, None] * np.cos(phases)
-        vyy[at] = vy[~still][:, None]
-        weight[at] = w
+    at = start[~still][:, None] + np.arange(2 * m)
+    vx[at], vyy[at], weight[at] = vx_moving, vy[~still][:, None], w_moving
     speed = np.hypot(vx, vyy)
     moving = speed > 0.0
     safe = np.where(moving, speed, 1.0)
@@ -183,41 +210,12 @@ def _nodes(velocity, angle, amplitude_pp, frequency, m, projected):
     return 1.0 / safe, np.where(moving, speed * speed, 0.0), np.where(moving, weight, 0.0), start, counts
 
 
-def _mu_e_nodes(inv_v, v2, p, k, mu_plus=None):
-    """mu_E (eq. 3) at nodes (N,) for parameters (k or 1, 1 or N), with mu* of eq. 4 (or the
-    constant ``mu_plus``): the arithmetic of :func:`mu_equilibrium` and :func:`mu_speed` in
-    place, on arrays of one shape (k, N)."""
-    u = np.multiply(p["V0"], inv_v, out=np.empty((k, len(inv_v))))
-    e = np.negative(u)
-    np.maximum(e, _EXP_FLOOR, out=e)
-    np.exp(e, out=e)
-    value = 1.0 - e  # the bracket of eq. 3, as in _bracket
-    value /= u
-    value -= e
-    small = u < 1e-2
-    if small.any():
-        value[small] = _bracket_series(u[small])
-    if mu_plus is None:
-        star = np.multiply(v2, -1.0 / p["k_V"], out=np.empty_like(u))
-        np.maximum(star, _EXP_FLOOR, out=star)
-        np.exp(star, out=star)
-        star *= p["mu_inf"] - p["mu_0"]
-        star += p["mu_inf"]
-        value *= star
-    else:
-        value *= mu_plus
-    q = p["q"]
-    value *= 2.0 * (q + 1.0)
-    np.subtract(1.0 + q, e, out=e)
-    value /= e
-    return value
-
-
 def _average(p, x, *, projected=False, constant_mu=False, m=PHASES):
     """Period average of mu_E for parameters (k, 1), (k, n) or (1, 1) against rows (n,): on the
     flat nodes of :func:`_flat_nodes`, in blocks of :data:`BLOCK_CELLS` cells, reduced per row.
-    Equal to :func:`period_average` of :func:`mu_equilibrium` (tests/test_physics_ultrasonic.py),
-    which evaluates (k, rows, nodes) arrays and took 1.4-1.6x as long at 16-32 posterior draws."""
+    The same equations (:func:`_eq3`, :func:`_eq4`) as :func:`period_average` of
+    :func:`mu_equilibrium` (tests/test_physics_ultrasonic.py), which evaluates (k, rows, nodes)
+    arrays and took 1.4-1.6x as long at 16-32 posterior draws."""
     inv_v, v2, weight, start, counts = _flat_nodes(x, m, projected)
     names = ("mu_plus", "q", "V0") if constant_mu else ("mu_inf", "mu_0", "k_V", "q", "V0")
     n = len(start)
@@ -232,7 +230,8 @@ def _average(p, x, *, projected=False, constant_mu=False, m=PHASES):
     step = max(1, BLOCK_CELLS // len(inv_v))
     for i in range(0, k, step):
         block = {name: v[i:i + step] if v.shape[0] > 1 else v for name, v in params.items()}
-        values = _mu_e_nodes(inv_v, v2, block, min(step, k - i), block.get("mu_plus"))
+        star = block["mu_plus"] if constant_mu else _eq4(v2, block["mu_inf"], block["mu_0"], block["k_V"])
+        values = _eq3(inv_v, star, block["q"], block["V0"])
         values *= weight
         out[i:i + step] = np.add.reduceat(values, start, axis=1)
     return out
