@@ -18,7 +18,7 @@ def _setup(model, data, rng):
 
 
 @pytest.mark.parametrize("module, model, data, column, cached", [
-    (textured, "textured_surface", "textured_synthetic", "normal_force", "_rows"),
+    (textured, "textured_surface", "textured_synthetic", "normal_force", "_terms"),
     (ultrasonic, "ultrasonic", "ultrasonic_synthetic", "amplitude_pp", "_nodes"),
 ])
 def test_in_place_change_of_a_covariate_is_seen(module, model, data, column, cached, rng):

@@ -22,8 +22,7 @@ def by_value(func):
         arrays = [np.frombuffer(b).reshape(shape) for b in blobs]
         out = func(*arrays, *scalars)
         for a in out:
-            if isinstance(a, np.ndarray):
-                a.flags.writeable = False
+            a.flags.writeable = False
         return out
 
     @wraps(func)

@@ -11,6 +11,8 @@ A flat reference sample has no texture geometry: its three texture covariates ar
 by design) and ``A_r = A_ac``.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from ._cache import by_value
@@ -29,7 +31,16 @@ _TEXTURE = ("asperity_radius", "asperity_height", "asperity_spacing")
 
 def reduced_modulus(E_skin, E_m, c):
     """Reduced modulus ``1/((1-nu_skin**2)/E_skin + (1-nu_m**2)/E_m)`` [Pa] (seed 002, eqs. 3, 13)."""
-    return 1.0 / ((1.0 - c["nu_skin"] ** 2) / E_skin + (1.0 - c["nu_m"] ** 2) / E_m)
+    return _reduced(E_skin, _sample_compliance(E_m, c["nu_m"]), c)
+
+
+def _sample_compliance(E_m, nu_m):
+    return (1.0 - nu_m**2) / E_m
+
+
+def _reduced(E_skin, c_m, c):
+    """:func:`reduced_modulus` with the sample's term ``(1-nu_m**2)/E_m`` = ``c_m`` given."""
+    return 1.0 / ((1.0 - c["nu_skin"] ** 2) / E_skin + c_m)
 
 
 def critical_load(E_skin_micro, sample_modulus, asperity_radius, asperity_height, asperity_spacing,
@@ -58,13 +69,35 @@ def contact_state(p, x, c, *, transition=True, pressures=True):
     ``transition`` is False and on a flat reference); ``p_trans``, ``p_asp`` mean pressures of
     the full-contact and asperity zones [Pa] (eqs. 11-12 in closed form: pbar*(1-(1-x)**1.5)/x
     and pbar*sqrt(1-x); p_trans = 1.5*pbar as x -> 0; omitted when ``pressures`` is False, as
-    the friction needs neither); ``A_r`` real contact area [m^2]; and, each (n,) and read-only,
-    ``flat`` (bool), ``ok`` (bool: texture geometry either complete or all missing, and F > 0),
-    ``F`` the normal force [N] (1 where F <= 0) and ``c_m`` = (1 - nu_m^2)/E_m [1/Pa].
+    the friction needs neither); ``A_r`` real contact area [m^2]; and ``flat`` (bool, (n,)) and
+    ``ok`` (bool, (n,): texture geometry either complete or all missing, and F > 0), both
+    read-only (cached with the covariates).
     """
-    f_safe, log_f, flat, ok, any_flat, crit, hertz, cell_scale, c_m = _rows(
-        *(x[k] for k in ("normal_force", "sample_modulus") + _TEXTURE), scalars=(float(c["nu_m"]),))
-    e1 = 1.0 / ((1.0 - c["nu_skin"] ** 2) / p["E_skin_micro"] + c_m)  # reduced_modulus
+    return _contact(p, _covariate_terms(x, c), c, transition=transition, pressures=pressures)
+
+
+class _Terms(NamedTuple):
+    """What :func:`contact_state` needs of the covariates alone, each (n,) (see :func:`_terms`)."""
+
+    f: np.ndarray  # normal force [N], 1 where F <= 0
+    log_f: np.ndarray
+    flat: np.ndarray  # flat reference (texture geometry all missing)
+    ok: np.ndarray  # texture geometry complete or all missing, and F > 0
+    any_flat: np.ndarray  # 0-d
+    crit: np.ndarray  # (8/9)*sqrt(R_asp)*h**1.5/lambda**2 (eq. 9); NaN texture filled with 1
+    hertz: np.ndarray  # 0.75*lambda**2*R_asp (eq. 12)
+    cell_scale: np.ndarray  # pi/lambda**2
+    c_m: np.ndarray  # (1 - nu_m**2)/E_m [1/Pa]
+
+
+def _covariate_terms(x, c):
+    return _terms(*(x[k] for k in ("normal_force", "sample_modulus") + _TEXTURE), scalars=(float(c["nu_m"]),))
+
+
+def _contact(p, t, c, *, transition, pressures):
+    """:func:`contact_state` from the covariates' terms ``t`` (:class:`_Terms`)."""
+    f_safe, log_f, flat, ok, any_flat, crit, hertz, cell_scale, c_m = t
+    e1 = _reduced(p["E_skin_micro"], c_m, c)
     a_ac = p["k_a"] * np.exp(p["m_a"] * log_f)  # k_a*F**m_a; log F has no parameter axes
     pbar = f_safe / a_ac
     if transition:
@@ -82,8 +115,7 @@ def contact_state(p, x, c, *, transition=True, pressures=True):
     cell = np.minimum(1.0, a_i * a_i * cell_scale)
     share = frac + one_minus * cell  # real area / apparent area
     a_r = a_ac * (np.where(flat, 1.0, share) if any_flat else share)
-    out = {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_asp": p_asp, "A_r": a_r, "flat": flat, "ok": ok,
-           "F": f_safe, "c_m": c_m}
+    out = {"A_ac": a_ac, "pbar": pbar, "x": frac, "p_asp": p_asp, "A_r": a_r, "flat": flat, "ok": ok}
     if pressures:
         with np.errstate(divide="ignore", invalid="ignore"):
             out["p_trans"] = np.where(frac > 0, pbar * (1.0 - one_minus**1.5) / frac, 1.5 * pbar)  # eq. 11
@@ -91,27 +123,25 @@ def contact_state(p, x, c, *, transition=True, pressures=True):
 
 
 @by_value
-def _rows(f, sample_modulus, r_asp, h, lam, nu_m):
-    """What :func:`contact_state` needs of the covariates alone (cached by their values):
-    F (1 where F <= 0) and log F, the flat-reference and support masks, whether any row is flat,
-    the geometry factors of eqs. 9 and 12 (NaN texture filled with 1), and (1-nu_m^2)/E_m."""
+def _terms(f, sample_modulus, r_asp, h, lam, nu_m):
+    """:class:`_Terms` of the covariates, cached by their values."""
     missing = [np.isnan(g) for g in (r_asp, h, lam)]
     flat = missing[0] & missing[1] & missing[2]
     ok = (missing[0] == missing[1]) & (missing[1] == missing[2]) & (f > 0)
     r_asp, h, lam = (np.where(m, 1.0, g) for m, g in zip(missing, (r_asp, h, lam)))  # harmless fill
     f_safe = np.where(f > 0, f, 1.0)
     lam2 = lam**2
-    return (f_safe, np.log(f_safe), flat, ok, np.asarray(flat.any()), (8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2,
-            0.75 * lam2 * r_asp, np.pi / lam2, (1.0 - nu_m**2) / sample_modulus)
+    return _Terms(f_safe, np.log(f_safe), flat, ok, np.asarray(flat.any()), (8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2,
+                  0.75 * lam2 * r_asp, np.pi / lam2, _sample_compliance(sample_modulus, nu_m))
 
 
 def _friction(p, x, c, *, transition, hysteresis):
-    s = contact_state(p, x, c, transition=transition, pressures=False)
-    f = s["F"]
-    mu = p["tau0"] * s["A_r"] / f + p["alpha"]
+    t = _covariate_terms(x, c)
+    s = _contact(p, t, c, transition=transition, pressures=False)
+    mu = p["tau0"] * s["A_r"] / t.f + p["alpha"]
     if hysteresis:
-        e0 = 1.0 / ((1.0 - c["nu_skin"] ** 2) / p["E_fingerpad"] + s["c_m"])  # reduced_modulus
-        mu = mu + p["beta_h"] * (9.0 / (128.0 * c["R_e"])) ** (2.0 / 3.0) * np.cbrt(f / e0)  # eq. 15/F
+        e0 = _reduced(p["E_fingerpad"], t.c_m, c)
+        mu = mu + p["beta_h"] * (9.0 / (128.0 * c["R_e"])) ** (2.0 / 3.0) * np.cbrt(t.f / e0)  # eq. 15/F
     return {"friction_coefficient": np.atleast_2d(np.where(s["ok"], mu, 0.0))}, s["ok"]
 
 
