@@ -45,6 +45,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from .errors import InputError
+from .posterior import noise_suffix
 from .units import UNITS, to_si
 
 __all__ = ["plot_ppc", "ppc_bands", "plot_spec", "plot_pair", "plot_trace", "plot_rank",
@@ -124,7 +125,7 @@ def parameter_units(fit):
     setup = fit.attr("setup")
     observables = setup["observables"]
     for o in observables:
-        suffix = "" if len(observables) == 1 else f"_{o}"
+        suffix = noise_suffix(observables, o)
         units[f"sigma{suffix}"] = "1" if setup["noise"].get(o) == "lognormal" else obs_units.get(o, "1")
         units[f"nu{suffix}"] = "1"
     return units

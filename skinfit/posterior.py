@@ -22,11 +22,16 @@ __all__ = ["Posterior", "Slot", "noise_parameter_names"]
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
+def noise_suffix(observables, obs):
+    """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
+    return "" if len(observables) == 1 else f"_{obs}"
+
+
 def noise_parameter_names(observables, noise):
     """Names of the noise parameters: ``sigma`` (+ ``nu``), suffixed when several observables."""
     names = []
     for obs in observables:
-        suffix = "" if len(observables) == 1 else f"_{obs}"
+        suffix = noise_suffix(observables, obs)
         names.append(f"sigma{suffix}")
         if noise[obs] == "student_t":
             names.append(f"nu{suffix}")
@@ -489,7 +494,7 @@ class Posterior:
             eps += mu
 
     def _suffix(self, o):
-        return "" if len(self.observables) == 1 else f"_{o}"
+        return noise_suffix(self.observables, o)
 
     def log_likelihood(self, theta):
         ll, _, _ = self._evaluate(np.atleast_2d(theta), False, predict=False)
