@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from skinfit.physics.ultrasonic import PHASES, _phase_nodes
+from skinfit.physics.ultrasonic import INTERP_MIN, INTERP_PER_DECADE, PHASES, _phase_nodes
 
-__all__ = ["make_fused", "check_fused", "FAMILIES", "ultrasonic_nodes"]
+__all__ = ["make_fused", "check_fused", "FAMILIES", "ultrasonic_nodes", "ultrasonic_interpolation"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -307,22 +307,41 @@ def ultrasonic_nodes(x, m=PHASES):
     return np.concatenate(speeds), np.concatenate(weights), start
 
 
+def ultrasonic_interpolation(x, m=PHASES):
+    """The period averages as skinfit takes them with parameters shared by all rows
+    (skinfit.physics.ultrasonic._interpolation), built here from :func:`ultrasonic_nodes`:
+    ``(speeds, matrix)``, mu_E at ``speeds`` (Chebyshev points in log speed over the moving
+    nodes, INTERP_PER_DECADE per decade) times ``matrix.T`` gives every row's average."""
+    speed, weight, start = ultrasonic_nodes(x, m)
+    used = (speed > 0.0) & (weight != 0.0)
+    s = np.log(np.where(used, speed, 1.0))
+    lo, hi = s[used].min(), s[used].max()
+    n = max(INTERP_MIN, math.ceil(INTERP_PER_DECADE * (hi - lo) / math.log(10.0)))
+    pts = lo + (hi - lo) * (1.0 - np.cos(np.pi * np.arange(n) / (n - 1))) / 2.0
+    b = (-1.0) ** np.arange(n)
+    b[0], b[-1] = b[0] / 2, b[-1] / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        basis = b / (s[:, None] - pts)
+        basis /= basis.sum(axis=1, keepdims=True)
+    hit = s[:, None] == pts
+    basis[hit.any(axis=1)] = hit[hit.any(axis=1)]
+    basis *= np.where(used, weight, 0.0)[:, None]
+    return np.exp(pts), np.add.reduceat(basis, start, axis=0)
+
+
 def _bracket_series(s):
     return s * (1 / 2 - s * (1 / 3 - s * (1 / 8 - s * (1 / 30 - s * (1 / 144 - s / 840)))))
 
 
 def _ultrasonic(post):
-    """Period average over fixed nodes (they depend only on the covariates) of the distinct
-    rows, one flat node axis."""
+    """Period average of the distinct rows: mu_E at fixed interpolation speeds (they depend only
+    on the covariates) times one matrix."""
     _expect(post, ("mu_inf", "mu_0", "k_V", "q", "V0", "sigma"), ["log", "identity", "log", "log", "log", "log"],
             {"friction_coefficient": "normal"})
     xu, cnt, stats = _distinct(post)
     ybar, ssw = stats["friction_coefficient"]
-    speed, weight, start = ultrasonic_nodes(xu)
-    moving = speed > 0.0
-    weight = np.where(moving, weight, 0.0)  # mu_E(0) = 0: a node at rest adds nothing
-    speed = np.where(moving, speed, 1.0)
-    v2, inv = speed * speed, 1.0 / speed
+    speed, matrix = ultrasonic_interpolation(xu)
+    v2, inv, matrix_t = speed * speed, 1.0 / speed, np.ascontiguousarray(matrix.T)
     n = post.n
     const = -0.5 * n * _LOG_2PI
     prior, lo, hi = _prior(post)
@@ -338,7 +357,7 @@ def _ultrasonic(post):
         if small.any():
             br[small] = _bracket_series(u[small])
         mu_e = 2.0 * (mu_inf + (mu_inf - mu_0) * np.exp(-v2 / k_v)) * (q + 1.0) * br / (1.0 + q - e)
-        d = ybar - np.add.reduceat(mu_e * weight, start, axis=1)
+        d = ybar - mu_e @ matrix_t
         ss = (ssw + (cnt * d * d).sum(axis=1)) / (sigma[:, 0] * sigma[:, 0])
         ok = (2.0 * mu_inf[:, 0] - mu_0[:, 0] > 0.0) & ((theta >= lo) & (theta <= hi)).all(axis=1)
         return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 5] + z.sum(axis=1) - z[:, 1], -np.inf)

@@ -35,10 +35,10 @@ import numpy as np
 
 try:  # imported as bench.pymc_models, or as pymc_models from a script in bench/
     from .common import PeakRSS, Result, diagnostics
-    from .fused import ultrasonic_nodes
+    from .fused import ultrasonic_interpolation
 except ImportError:
     from common import PeakRSS, Result, diagnostics
-    from fused import ultrasonic_nodes
+    from fused import ultrasonic_interpolation
 
 __all__ = ["build_pymc", "check_pymc", "run_pymc", "float64_constants", "FORWARDS"]
 
@@ -159,36 +159,23 @@ def _wavy_surface(p, x, c):
 
 
 def _ultrasonic(p, x, c):
-    """skinfit.physics.ultrasonic.ultrasonic: the period average over skinfit's own fixed nodes
-    (Gauss-Legendre, PHASES per smooth piece; they depend only on the covariates): a weighted
-    sum of mu_E(|v_r|) over a (rows, nodes) matrix for the vibrated rows, one node per row
-    without vibration."""
+    """skinfit.physics.ultrasonic.ultrasonic with its parameters shared by all rows: mu_E at
+    fixed interpolation speeds (Chebyshev points in log speed; they depend only on the
+    covariates) times one matrix, the rows' period averages over skinfit's quadrature nodes
+    (fused.ultrasonic_interpolation)."""
     import pytensor.tensor as pt
 
-    speed, weight, start = ultrasonic_nodes(x)
-    counts = np.diff(np.append(start, len(speed)))
-
-    def mu_e(v):  # mu_E at fixed speeds v (numpy), 0 at rest
-        moving = v > 0.0
-        v = np.where(moving, v, 1.0)
-        u = p["V0"] / v
-        e = pt.exp(-u)
-        small = u < 1e-2  # series there (as skinfit); both sides see a harmless argument
-        us = pt.where(small, u, 0.0)
-        ul = pt.where(small, 1.0, u)
-        series = us * (1 / 2 - us * (1 / 3 - us * (1 / 8 - us * (1 / 30 - us * (1 / 144 - us / 840)))))
-        bracket = pt.where(small, series, -pt.expm1(-ul) / ul - e)
-        mu_star = p["mu_inf"] + (p["mu_inf"] - p["mu_0"]) * pt.exp(-(v**2) / p["k_V"])
-        return pt.where(moving, 2.0 * mu_star * (p["q"] + 1.0) * bracket / (1.0 + p["q"] - e), 0.0)
-
-    parts, order = [], []
-    for width in np.unique(counts):  # 1 (no vibration) and 2*PHASES
-        rows = np.flatnonzero(counts == width)
-        idx = start[rows][:, None] + np.arange(width)
-        parts.append(pt.sum(weight[idx] * mu_e(speed[idx]), axis=1))
-        order.append(rows)
-    pred = pt.concatenate(parts)[np.argsort(np.concatenate(order))]
-    return {"friction_coefficient": pred}, {}, 2.0 * p["mu_inf"] - p["mu_0"] > 0.0
+    v, matrix = ultrasonic_interpolation(x)
+    u = p["V0"] / v
+    e = pt.exp(-u)
+    small = u < 1e-2  # series there (as skinfit); both sides see a harmless argument
+    us = pt.where(small, u, 0.0)
+    ul = pt.where(small, 1.0, u)
+    series = us * (1 / 2 - us * (1 / 3 - us * (1 / 8 - us * (1 / 30 - us * (1 / 144 - us / 840)))))
+    bracket = pt.where(small, series, -pt.expm1(-ul) / ul - e)
+    mu_star = p["mu_inf"] + (p["mu_inf"] - p["mu_0"]) * pt.exp(-(v**2) / p["k_V"])
+    mu_e = 2.0 * mu_star * (p["q"] + 1.0) * bracket / (1.0 + p["q"] - e)
+    return {"friction_coefficient": pt.dot(matrix, mu_e)}, {}, 2.0 * p["mu_inf"] - p["mu_0"] > 0.0
 
 
 FORWARDS = {"electroadhesion": _electroadhesion, "textured_surface": _textured_surface,

@@ -267,3 +267,63 @@ def test_flat_blocked_average_equals_the_reference_quadrature(block_cells, monke
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
         assert np.all(got[:, :3] == 0.0)  # a finger at rest on a plate at rest: mu_E(0) = 0
         assert np.all(got[:, 3:6] != 0.0)
+
+
+def _design_with_extremes():
+    """The shipped rows plus rows at 1e-9 and 10 m/s, along, near and across the vibration axis."""
+    frame = skinfit.load_dataset("ultrasonic_synthetic").frame.copy()
+    extra = frame.iloc[:6].copy()
+    extra["velocity"] = [1e-9, 1e-9, 10.0, 10.0, 0.05, 0.05]
+    extra["direction_angle"] = [0.0, 1e-3, 0.0, math.pi / 2, 0.01, 0.0]
+    extra["amplitude_pp"] = [1.6e-6, 1.6e-6, 10e-6, 0.0, 1.6e-6, 1.6e-6]
+    frame = pd.concat([frame, extra], ignore_index=True)
+    return {c: frame[c].to_numpy(float) for c in ("velocity", "direction_angle", "amplitude_pp", "frequency")}
+
+
+@pytest.mark.parametrize("name", ["ultrasonic", "ultrasonic_projected", "ultrasonic_constant_mu"])
+def test_interpolated_average_equals_the_reference_quadrature(name, rng):
+    """With parameters shared by all rows the models interpolate mu in log speed
+    (_interpolation); over 400 prior draws the averages equal period_average of
+    mu_equilibrium on the same Gauss-Legendre nodes (the reference, computed independently on
+    (k, rows, nodes) arrays) within 1e-10, on the shipped rows plus extreme ones (6.2 decades
+    of node speeds)."""
+    model, priors = skinfit.load_model(name), skinfit.load_priors(name)
+    x = _design_with_extremes()
+    theta = {p: priors[p].rvs((400, 1), rng) for p in model.parameter_names}
+    e = {p: v[..., None] for p, v in theta.items()}
+    ux, uy = np.cos(x["direction_angle"]), np.sin(x["direction_angle"])
+
+    def reference(speed, vx, vy, rows):
+        star = e["mu_plus"] if "mu_plus" in e else us.mu_speed(speed, e["mu_inf"], e["mu_0"], e["k_V"])
+        mu = us.mu_equilibrium(speed, star, e["q"], e["V0"])
+        if name == "ultrasonic_projected":
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mu = mu * np.where(speed > 0, (vx * ux[rows, None] + vy * uy[rows, None]) / speed, 0.0)
+        return mu
+
+    want = us.period_average(reference, x["velocity"], x["direction_angle"], x["amplitude_pp"], x["frequency"])
+    got = getattr(us, name)(theta, x, {})[0]["friction_coefficient"]
+    assert got.shape == want.shape == (400, len(x["velocity"]))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10)
+
+
+def test_interpolation_points_scale_with_the_decades_of_node_speeds(monkeypatch, rng):
+    """The number of interpolation points follows the span of node speeds (192 on the shipped
+    rows, 4.8 decades; more with the extreme rows), and too few per decade show: at 7 per decade
+    the averages miss the reference by > 1e-4 (the accuracy test above can fail)."""
+    frame = skinfit.load_dataset("ultrasonic_synthetic").frame
+    shipped = {c: frame[c].to_numpy(float) for c in ("velocity", "direction_angle", "amplitude_pp", "frequency")}
+    n_shipped = us._interpolation(*us._rows(shipped), scalars=(us.PHASES, False))[2].shape[1]
+    n_extreme = us._interpolation(*us._rows(_design_with_extremes()), scalars=(us.PHASES, False))[2].shape[1]
+    assert n_shipped == 192 and n_extreme > n_shipped
+    theta = {p: np.full((1, 1), v) for p, v in PAPER.items()}
+    theta.update(k_V=rng.uniform(1e-5, 1e-2, (200, 1)), V0=rng.uniform(1e-3, 0.3, (200, 1)))
+    per_row = {**theta, "q": np.full((1, len(frame)), PAPER["q"])}  # per-row parameters: the node sums
+    want = us.ultrasonic(per_row, shipped, {})[0]["friction_coefficient"]
+    assert np.abs(us.ultrasonic(theta, shipped, {})[0]["friction_coefficient"] - want).max() < 1e-11
+    monkeypatch.setattr(us, "INTERP_PER_DECADE", 7)
+    us._interpolation.cache_clear()
+    try:
+        assert np.abs(us.ultrasonic(theta, shipped, {})[0]["friction_coefficient"] - want).max() > 1e-4
+    finally:
+        us._interpolation.cache_clear()
