@@ -14,7 +14,7 @@ otherwise stick.
 import math
 
 import numpy as np
-from scipy.special import gammaln, logsumexp
+from scipy.special import gammaln
 
 __all__ = ["MixtureT", "fit_mixture", "select_mixture"]
 
@@ -62,9 +62,7 @@ class MixtureT:
 
     def logpdf(self, x):
         """Normalised log-density at points ``x`` (k, d) -> (k,)."""
-        a = self.component_log_densities(x)
-        top = a.max(axis=1)
-        return top + np.log(np.exp(a - top[:, None]).sum(axis=1))
+        return _logsumexp_rows(self.component_log_densities(x))
 
     def draw(self, random, size):
         """``size`` draws, (size, d), from a numpy ``RandomState`` or ``Generator``
@@ -84,6 +82,16 @@ class MixtureT:
     def from_dict(cls, record):
         """The mixture :meth:`to_dict` described, bit for bit (JSON keeps float64 exactly)."""
         return cls(record["weights"], record["means"], record["covs"], record["nu"])
+
+
+def _logsumexp_rows(a):
+    """``log(sum(exp(a), axis=1))`` for (k, K) ``a``, -inf where a row is all -inf (scipy's
+    ``logsumexp`` gives the same to round-off, at 0.35 ms a call of array-API dispatch: a third
+    of an EM fit of the proposal)."""
+    top = a.max(axis=1)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        return top + np.log(np.exp(a - top[:, None]).sum(axis=1))
 
 
 def fit_mixture(x, n_components, rng, *, weights=None, nu=5.0, max_iter=40, tol=1e-3, min_weight=None):
@@ -122,7 +130,7 @@ def fit_mixture(x, n_components, rng, *, weights=None, nu=5.0, max_iter=40, tol=
     last = -np.inf
     for _ in range(max_iter):
         log_r = MixtureT(mix, means, covs, math.inf).component_log_densities(x)
-        norm = logsumexp(log_r, axis=1)
+        norm = _logsumexp_rows(log_r)
         ll = float(w @ norm)
         r = np.exp(log_r - norm[:, None]) * w[:, None]
         nk = r.sum(axis=0)
