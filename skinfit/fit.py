@@ -68,8 +68,8 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         Minimum effective sample size per parameter to call the run converged.
     n_global, n_local : int
         MAP search: prior draws scored in one vectorised call, then SLSQP from the ``n_local``
-        best of them and a BOBYQA polish (:func:`~skinfit.optimize.find_map`; 0.07-0.4 s on
-        the shipped posteriors, ultrasonic 0.5 s; 4 starts found the wavy two-point model's
+        best of them and a BOBYQA polish (:func:`~skinfit.optimize.find_map`; 0.05-0.4 s on
+        the shipped posteriors; 4 starts found the wavy two-point model's
         best optimum in 5 of 5 seeds where 2 found it in 2 of 3).
     strict : bool
         Raise instead of warn when the run does not meet its convergence criteria.
