@@ -327,3 +327,19 @@ def test_interpolation_points_scale_with_the_decades_of_node_speeds(monkeypatch,
         assert np.abs(us.ultrasonic(theta, shipped, {})[0]["friction_coefficient"] - want).max() > 1e-4
     finally:
         us._interpolation.cache_clear()
+
+
+@pytest.mark.parametrize("velocity, amp", [([0.08, 0.08], 0.0), ([0.0, 0.0], 0.0), ([0.0, 0.05], 0.0), ([], 0.0)],
+                         ids=["one speed", "all at rest", "one at rest", "no rows"])
+def test_interpolation_of_degenerate_designs(velocity, amp):
+    """Designs whose node speeds span no interval: a single speed (one interpolation point),
+    only fingers at rest (nothing to interpolate: 0), none at all; equal to the node sums."""
+    x = _x(velocity, amp=amp)
+    p = {k: np.array([[v], [2 * v]]) for k, v in PAPER.items()}
+    got = us.ultrasonic(p, x, {})[0]["friction_coefficient"]
+    per_row = {**p, "q": np.repeat(p["q"], len(velocity), axis=1)}  # the node sums
+    want = us.ultrasonic(per_row, x, {})[0]["friction_coefficient"] if velocity else np.empty((2, 0))
+    assert got.shape == (2, len(velocity)) and np.all(np.isfinite(got))
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=0)
+    if velocity:
+        assert np.all((got == 0) == (np.asarray(velocity) == 0))  # mu_E(0) = 0

@@ -205,7 +205,7 @@ def _nodes(velocity, angle, amplitude_pp, frequency, m, projected):
     velocity, angle, amplitude_pp, frequency = (a.ravel() for a in (velocity, angle, amplitude_pp, frequency))
     still, vf_x, vy, vx_moving, w_moving = _eq5(velocity, angle, amplitude_pp, frequency, m)
     counts = np.where(still, 1, 2 * m)
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.intp)
+    start = (np.cumsum(counts) - counts).astype(np.intp)  # empty without rows
     vx, vyy, weight = (np.empty(int(counts.sum())) for _ in range(3))
     vx[start[still]], vyy[start[still]], weight[start[still]] = vf_x[still], vy[still], 1.0
     at = start[~still][:, None] + np.arange(2 * m)
