@@ -37,7 +37,7 @@ class MixtureT:
         self.covs = np.asarray(covs, dtype=float).reshape(-1, self.d, self.d)
         self.chol = np.linalg.cholesky(self.covs)
         self.nu = float(nu)
-        self._inv_chol = np.linalg.inv(self.chol)
+        self._inv_chol_t = np.ascontiguousarray(np.linalg.inv(self.chol).transpose(0, 2, 1))
         self._log_det = np.log(np.diagonal(self.chol, axis1=1, axis2=2)).sum(axis=1)
         d, v = self.d, self.nu
         if math.isinf(v):
@@ -53,10 +53,8 @@ class MixtureT:
     def component_log_densities(self, x):
         """(k, K): log weight + normalised log-density of each component at points ``x`` (k, d)."""
         x = np.atleast_2d(x)
-        q = np.empty((len(x), len(self.weights)))
-        for c, (m, inv) in enumerate(zip(self.means, self._inv_chol)):
-            y = (x - m) @ inv.T
-            q[:, c] = np.einsum("ki,ki->k", y, y)
+        y = np.matmul(x[None] - self.means[:, None], self._inv_chol_t)  # (K, k, d): whitened per component
+        q = np.einsum("cki,cki->kc", y, y)
         kernel = -0.5 * q if math.isinf(self.nu) else -0.5 * (self.nu + self.d) * np.log1p(q / self.nu)
         return self._log_w + self._log_c - self._log_det + kernel
 
@@ -139,7 +137,8 @@ def fit_mixture(x, n_components, rng, *, weights=None, nu=5.0, max_iter=40, tol=
             r, nk = r[:, keep], nk[keep]
         mix = nk / nk.sum()
         means = (r.T @ x) / nk[:, None]
-        covs = np.array([((x - m).T * rc) @ (x - m) for m, rc in zip(means, r.T)]) / nk[:, None, None] + ridge
+        xc = x[None] - means[:, None]  # (K, n, d)
+        covs = np.matmul(xc.transpose(0, 2, 1) * r.T[:, None], xc) / nk[:, None, None] + ridge
         if abs(ll - last) < tol:
             break
         last = ll
