@@ -26,10 +26,11 @@ product with the nodes' weights times the barycentric interpolation basis
 (:func:`_interpolation`, cached: it depends on the covariates alone). Against the node sum,
 over 2000 prior draws on the shipped design: max abs difference 4.6e-3, 9.0e-6, 1.4e-11,
 3.1e-13 at 7, 14, 28, 40 points per decade (posterior draws: 4e-15 at 40), while the node
-sum's own error is about 1e-8; 8-25x less time per call at 16-256 posterior draws. With parameters per row (split by a column) the models sum over the nodes
-of all rows flattened into one axis, in blocks of at most ``BLOCK_CELLS`` (parameter vector,
-node) cells that stay in cache. :func:`period_average` of :func:`mu_equilibrium`, on
-(k, rows, nodes) arrays, is the reference both are tested against.
+sum's own error is about 1e-8; 8-25x less time per call at 16-256 posterior draws. With
+parameters per row (split by a column) the models sum over the nodes of all rows flattened into
+one axis, in blocks of at most ``BLOCK_CELLS`` (parameter vector, node) cells that stay in
+cache. :func:`period_average` of :func:`mu_equilibrium`, on (k, rows, nodes) arrays, is the
+reference both are tested against.
 """
 
 from functools import lru_cache
