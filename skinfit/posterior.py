@@ -371,7 +371,6 @@ class Posterior:
         ll, pred = {}, {}
         with np.errstate(divide="ignore", invalid="ignore"):  # once: entering it costs ~7 us
             for o in self.observables:
-                suffix = self._suffix(o)
                 mu_u = pred_u[o]
                 if mu_u.shape != (k, self.n_unique):
                     mu_u = np.broadcast_to(mu_u, (k, self.n_unique))
@@ -379,7 +378,7 @@ class Posterior:
                 if predict or pointwise or noise == "student_t":
                     pred[o] = mu_u[:, self._inverse]
                 if noise != "student_t" and not pointwise:
-                    sigma = params[f"sigma{suffix}"]
+                    sigma = params[f"sigma{self._suffix(o)}"]
                     m = np.log(mu_u) if noise == "lognormal" else mu_u
                     d = self._zbar[o] - m
                     ss = ((self._ssw[o] + self._counts * d * d) / (sigma * sigma)).sum(axis=1)
@@ -387,7 +386,7 @@ class Posterior:
                                  else (self._counts * np.log(sigma)).sum(axis=1))
                     ll[o] = -0.5 * ss - log_sigma - 0.5 * self.n * _LOG_2PI - self._sum_logy.get(o, 0.0)
                 else:
-                    sigma = _take(theta, self._param_index[f"sigma{suffix}"])
+                    sigma = self._noise_param(theta, "sigma", o)
                     if noise == "lognormal":  # the log on distinct rows, then to every row
                         r = np.log(mu_u)[:, self._inverse]
                         np.subtract(self._logy[o], r, out=r)
@@ -395,7 +394,7 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
-                        nu = _take(theta, self._param_index[f"nu{suffix}"])
+                        nu = self._noise_param(theta, "nu", o)
                         value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
                                  - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))
                     else:
@@ -477,7 +476,7 @@ class Posterior:
         out = {}
         for o in self.observables:
             if self.noise[o] == "student_t":
-                nu = _take(theta, self._param_index[f"nu{self._suffix(o)}"])
+                nu = self._noise_param(theta, "nu", o)
                 out[o] = rng.standard_t(np.broadcast_to(nu, (len(theta), self.n)))
             else:
                 out[o] = rng.standard_normal((len(theta), self.n))
@@ -486,7 +485,7 @@ class Posterior:
     def _observe(self, eps, mu, theta, o):
         """Standardised noise ``eps`` (k, n) turned into observations around predictions ``mu``
         of parameter vectors ``theta``, in place (these are (draws, rows) arrays)."""
-        eps *= _take(theta, self._param_index[f"sigma{self._suffix(o)}"])
+        eps *= self._noise_param(theta, "sigma", o)
         if self.noise[o] == "lognormal":
             np.exp(eps, out=eps)
             eps *= mu
@@ -495,6 +494,11 @@ class Posterior:
 
     def _suffix(self, o):
         return noise_suffix(self.observables, o)
+
+    def _noise_param(self, theta, kind, o):
+        """Observable ``o``'s noise parameter ``kind`` (``sigma`` or ``nu``) in ``theta``, (k, 1)
+        or, split by a column, (k, n)."""
+        return _take(theta, self._param_index[f"{kind}{self._suffix(o)}"])
 
     def log_likelihood(self, theta):
         ll, _, _ = self._evaluate(np.atleast_2d(theta), False, predict=False)

@@ -12,9 +12,7 @@ def _setup(model, data, rng):
     from skinfit.posterior import Posterior
 
     post = Posterior(skinfit.load_model(model), skinfit.load_priors(model), skinfit.load_dataset(data))
-    theta = post.sample_prior(8, rng)
-    params = {p: theta[:, j:j + 1] for p, j in post._param_index.items()}
-    return {c: v.copy() for c, v in post.x.items()}, params, post.constants
+    return {c: v.copy() for c, v in post.x.items()}, post.unpack(post.sample_prior(8, rng)), post.constants
 
 
 @pytest.mark.parametrize("module, model, data, column, cached", [

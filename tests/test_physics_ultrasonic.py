@@ -234,6 +234,28 @@ def test_support_is_a_positive_friction_factor(name):
     assert np.all(np.isfinite(y["friction_coefficient"]))
 
 
+def _reference_average(name, p, x):
+    """Model ``name``'s friction by :func:`period_average` of :func:`mu_equilibrium` on
+    (k, rows, nodes) arrays, parameters ``p`` (k, 1) or (k, n): the reference the models' own
+    averages (flat nodes, interpolation) are tested against."""
+    e = {k: np.asarray(v, dtype=float)[..., None] for k, v in p.items()}
+    ux, uy = np.cos(x["direction_angle"]), np.sin(x["direction_angle"])
+
+    def per_row(k, rows):
+        return e[k][:, rows] if e[k].shape[1] > 1 else e[k]
+
+    def integrand(speed, vx, vy, rows):
+        star = (per_row("mu_plus", rows) if name == "ultrasonic_constant_mu"
+                else us.mu_speed(speed, per_row("mu_inf", rows), per_row("mu_0", rows), per_row("k_V", rows)))
+        mu = us.mu_equilibrium(speed, star, per_row("q", rows), per_row("V0", rows))
+        if name == "ultrasonic_projected":
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mu = mu * np.where(speed > 0, (vx * ux[rows, None] + vy * uy[rows, None]) / speed, 0.0)
+        return mu
+
+    return us.period_average(integrand, *us._rows(x))
+
+
 @pytest.mark.parametrize("block_cells", [10**9, 500])
 def test_flat_blocked_average_equals_the_reference_quadrature(block_cells, monkeypatch, rng):
     """The models' period average (nodes of all rows on one axis, cached, parameter vectors in
@@ -247,22 +269,9 @@ def test_flat_blocked_average_equals_the_reference_quadrature(block_cells, monke
     x["velocity"][:3], x["amplitude_pp"][:3], x["amplitude_pp"][3:6] = 0.0, 0.0, 1.6e-6
     p = {"mu_inf": rng.uniform(1.0, 3.0, (k, 1)), "mu_0": rng.uniform(0.01, 0.9, (k, n)), "k_V": np.array([[0.0048]]),
          "q": rng.uniform(0.001, 0.1, (k, 1)), "V0": rng.uniform(0.02, 0.2, (k, 1)), "mu_plus": rng.uniform(1.0, 2.0, (k, n))}
-    ux, uy = np.cos(x["direction_angle"]), np.sin(x["direction_angle"])
-    e = {name: v[..., None] for name, v in p.items()}
-
-    def reference(speed, vx, vy, rows, constant=False, projected=False):
-        star = e["mu_plus"][:, rows] if constant else us.mu_speed(speed, e["mu_inf"], e["mu_0"][:, rows], e["k_V"])
-        mu = us.mu_equilibrium(speed, star, e["q"], e["V0"])
-        if projected:
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mu = mu * np.where(speed > 0, (vx * ux[rows, None] + vy * uy[rows, None]) / speed, 0.0)
-        return mu
-
-    args = (x["velocity"], x["direction_angle"], x["amplitude_pp"], x["frequency"])
-    for f, kw in ((us.ultrasonic, {}), (us.ultrasonic_projected, {"projected": True}),
-                  (us.ultrasonic_constant_mu, {"constant": True})):
-        want = us.period_average(lambda s, vx, vy, rows: reference(s, vx, vy, rows, **kw), *args)
-        got = f(p, x, {})[0]["friction_coefficient"]
+    for name in ("ultrasonic", "ultrasonic_projected", "ultrasonic_constant_mu"):
+        want = _reference_average(name, p, x)
+        got = getattr(us, name)(p, x, {})[0]["friction_coefficient"]
         assert got.shape == (k, n) and np.all(np.isfinite(got))
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
         assert np.all(got[:, :3] == 0.0)  # a finger at rest on a plate at rest: mu_E(0) = 0
@@ -276,7 +285,10 @@ def _design_with_extremes():
     extra["velocity"] = [1e-9, 1e-9, 10.0, 10.0, 0.05, 0.05]
     extra["direction_angle"] = [0.0, 1e-3, 0.0, math.pi / 2, 0.01, 0.0]
     extra["amplitude_pp"] = [1.6e-6, 1.6e-6, 10e-6, 0.0, 1.6e-6, 1.6e-6]
-    frame = pd.concat([frame, extra], ignore_index=True)
+    return _covariates(pd.concat([frame, extra], ignore_index=True))
+
+
+def _covariates(frame):
     return {c: frame[c].to_numpy(float) for c in ("velocity", "direction_angle", "amplitude_pp", "frequency")}
 
 
@@ -290,18 +302,7 @@ def test_interpolated_average_equals_the_reference_quadrature(name, rng):
     model, priors = skinfit.load_model(name), skinfit.load_priors(name)
     x = _design_with_extremes()
     theta = {p: priors[p].rvs((400, 1), rng) for p in model.parameter_names}
-    e = {p: v[..., None] for p, v in theta.items()}
-    ux, uy = np.cos(x["direction_angle"]), np.sin(x["direction_angle"])
-
-    def reference(speed, vx, vy, rows):
-        star = e["mu_plus"] if "mu_plus" in e else us.mu_speed(speed, e["mu_inf"], e["mu_0"], e["k_V"])
-        mu = us.mu_equilibrium(speed, star, e["q"], e["V0"])
-        if name == "ultrasonic_projected":
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mu = mu * np.where(speed > 0, (vx * ux[rows, None] + vy * uy[rows, None]) / speed, 0.0)
-        return mu
-
-    want = us.period_average(reference, x["velocity"], x["direction_angle"], x["amplitude_pp"], x["frequency"])
+    want = _reference_average(name, theta, x)
     got = getattr(us, name)(theta, x, {})[0]["friction_coefficient"]
     assert got.shape == want.shape == (400, len(x["velocity"]))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-10)
@@ -312,7 +313,7 @@ def test_interpolation_points_scale_with_the_decades_of_node_speeds(monkeypatch,
     rows, 4.8 decades; more with the extreme rows), and too few per decade show: at 7 per decade
     the averages miss the reference by > 1e-4 (the accuracy test above can fail)."""
     frame = skinfit.load_dataset("ultrasonic_synthetic").frame
-    shipped = {c: frame[c].to_numpy(float) for c in ("velocity", "direction_angle", "amplitude_pp", "frequency")}
+    shipped = _covariates(frame)
     n_shipped = us._interpolation(*us._rows(shipped), scalars=(us.PHASES, False))[2].shape[1]
     n_extreme = us._interpolation(*us._rows(_design_with_extremes()), scalars=(us.PHASES, False))[2].shape[1]
     assert n_shipped == 192 and n_extreme > n_shipped
@@ -333,7 +334,8 @@ def test_interpolation_points_scale_with_the_decades_of_node_speeds(monkeypatch,
                          ids=["one speed", "all at rest", "one at rest", "no rows"])
 def test_interpolation_of_degenerate_designs(velocity, amp):
     """Designs whose node speeds span no interval: a single speed (one interpolation point),
-    only fingers at rest (nothing to interpolate: 0), none at all; equal to the node sums."""
+    only fingers at rest (nothing to interpolate: 0), none at all; equal to the node sums, and
+    without vibration to eqs. 3-4 written out (mu_E at the finger's own speed)."""
     x = _x(velocity, amp=amp)
     p = {k: np.array([[v], [2 * v]]) for k, v in PAPER.items()}
     got = us.ultrasonic(p, x, {})[0]["friction_coefficient"]
@@ -343,3 +345,10 @@ def test_interpolation_of_degenerate_designs(velocity, amp):
     np.testing.assert_allclose(got, want, rtol=1e-13, atol=0)
     if velocity:
         assert np.all((got == 0) == (np.asarray(velocity) == 0))  # mu_E(0) = 0
+    for j, v in enumerate(velocity):
+        if v > 0:
+            a = {k: w[:, 0] for k, w in p.items()}
+            e = np.exp(-a["V0"] / v)
+            star = a["mu_inf"] + (a["mu_inf"] - a["mu_0"]) * np.exp(-v * v / a["k_V"])
+            want_j = 2 * star * (a["q"] + 1) * (v / a["V0"] * (1 - e) - e) / (1 + a["q"] - e)
+            np.testing.assert_allclose(got[:, j], want_j, rtol=1e-13)

@@ -259,7 +259,7 @@ def _interpolation(velocity, angle, amplitude_pp, frequency, m, projected):
             basis /= basis.sum(axis=1, keepdims=True)
         rows_hit = hit.any(axis=1)
         basis[rows_hit] = hit[rows_hit]  # a node on an interpolation point takes its value
-        basis *= np.where(used[a:b], weight[a:b], 0.0)[:, None]
+        basis *= weight[a:b, None]  # 0 at the nodes left out
         matrix[r:r_end] = np.add.reduceat(basis, start[r:r_end] - a, axis=0)
         r = r_end
     speeds = np.exp(pts)
