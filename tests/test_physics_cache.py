@@ -6,11 +6,10 @@ import pytest
 
 import skinfit
 from skinfit.physics import textured, ultrasonic
+from skinfit.posterior import Posterior
 
 
 def _setup(model, data, rng):
-    from skinfit.posterior import Posterior
-
     post = Posterior(skinfit.load_model(model), skinfit.load_priors(model), skinfit.load_dataset(data))
     return {c: v.copy() for c, v in post.x.items()}, post.unpack(post.sample_prior(8, rng)), post.constants
 

@@ -292,6 +292,15 @@ def _covariates(frame):
     return {c: frame[c].to_numpy(float) for c in ("velocity", "direction_angle", "amplitude_pp", "frequency")}
 
 
+def _node_sums(p, x):
+    """us.ultrasonic's friction summed over the quadrature nodes (no interpolation): ``q``
+    given per row, as a parameter split by a column would be (on two rows or more: one row's
+    (k, 1) reads as shared)."""
+    assert len(x["velocity"]) > 1
+    per_row = {**p, "q": np.broadcast_to(p["q"], (len(p["q"]), len(x["velocity"])))}
+    return us.ultrasonic(per_row, x, {})[0]["friction_coefficient"]
+
+
 @pytest.mark.parametrize("name", ["ultrasonic", "ultrasonic_projected", "ultrasonic_constant_mu"])
 def test_interpolated_average_equals_the_reference_quadrature(name, rng):
     """With parameters shared by all rows the models interpolate mu in log speed
@@ -319,8 +328,7 @@ def test_interpolation_points_scale_with_the_decades_of_node_speeds(monkeypatch,
     assert n_shipped == 192 and n_extreme > n_shipped
     theta = {p: np.full((1, 1), v) for p, v in PAPER.items()}
     theta.update(k_V=rng.uniform(1e-5, 1e-2, (200, 1)), V0=rng.uniform(1e-3, 0.3, (200, 1)))
-    per_row = {**theta, "q": np.full((1, len(frame)), PAPER["q"])}  # per-row parameters: the node sums
-    want = us.ultrasonic(per_row, shipped, {})[0]["friction_coefficient"]
+    want = _node_sums(theta, shipped)
     assert np.abs(us.ultrasonic(theta, shipped, {})[0]["friction_coefficient"] - want).max() < 1e-11
     monkeypatch.setattr(us, "INTERP_PER_DECADE", 7)
     us._interpolation.cache_clear()
@@ -339,8 +347,7 @@ def test_interpolation_of_degenerate_designs(velocity, amp):
     x = _x(velocity, amp=amp)
     p = {k: np.array([[v], [2 * v]]) for k, v in PAPER.items()}
     got = us.ultrasonic(p, x, {})[0]["friction_coefficient"]
-    per_row = {**p, "q": np.repeat(p["q"], len(velocity), axis=1)}  # the node sums
-    want = us.ultrasonic(per_row, x, {})[0]["friction_coefficient"] if velocity else np.empty((2, 0))
+    want = _node_sums(p, x) if velocity else np.empty((2, 0))
     assert got.shape == (2, len(velocity)) and np.all(np.isfinite(got))
     np.testing.assert_allclose(got, want, rtol=1e-13, atol=0)
     if velocity:

@@ -100,8 +100,9 @@ def _eq3(inv_v, mu_star, q, v0):
     np.exp(e, out=e)
     value = _bracket(u, e)
     value *= mu_star
-    value *= 2.0 * (np.asarray(q) + 1.0)
-    np.subtract(1.0 + q, e, out=e)
+    q1 = 1.0 + np.asarray(q)
+    value *= 2.0 * q1
+    np.subtract(q1, e, out=e)
     value /= e
     return value
 
