@@ -83,6 +83,11 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     Returns
     -------
     Fit
+        Its ``attr("timings")`` [s]: ``map_s`` the MAP search; ``start_s`` from the first random
+        draw to the first step (the MAP search and the importance start); ``sampling_s``;
+        ``tree_s`` the result tree; ``total_s`` the whole call; ``resumed``.  A resumed fit
+        (``resumed`` true) had its MAP and start in the run that wrote the checkpoint: its
+        ``map_s`` is that run's, ``start_s`` is 0 and ``sampling_s`` sums every run's sampling.
     """
     t_start = time.perf_counter()
     model = model if isinstance(model, Model) else load_model(model)
@@ -127,7 +132,8 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     now = time.perf_counter()
     idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds,
                                          "start_s": t_start_s if saved is None else 0.0,
-                                         "sampling_s": run.seconds, "tree_s": now - t_tree, "total_s": now - t_start})
+                                         "sampling_s": run.seconds, "tree_s": now - t_tree, "total_s": now - t_start,
+                                         "resumed": saved is not None})
     for w in json.loads(idata.attrs["warnings"]):  # non-convergence was warned above
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
@@ -265,6 +271,15 @@ def _derived_summary(tree):
     return table
 
 
+def _wall_time_text(t):
+    """The timings of a fit (see :func:`fit`) in one line."""
+    if t.get("resumed"):
+        return (f"wall time: resumed from a checkpoint (MAP {t['map_s']:.2f} s in the first run), sampling "
+                f"{t['sampling_s']:.2f} s over all runs, result tree {t['tree_s']:.2f} s, this call {t['total_s']:.2f} s")
+    return (f"wall time: MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, "
+            f"sampling {t['sampling_s']:.2f} s, result tree {t['tree_s']:.2f} s, total {t['total_s']:.2f} s")
+
+
 @lru_cache(maxsize=1)
 def _versions():
     out = {}
@@ -386,10 +401,7 @@ class Fit:
                  + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
                  + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
                  f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
-                 f"wall time: MAP {t['map_s']:.2f} s"
-                 + (f", importance start {t['start_s'] - t['map_s']:.2f} s" if "start_s" in t else "")
-                 + f", sampling {t['sampling_s']:.2f} s"
-                 + (f", result tree {t['tree_s']:.2f} s" if "tree_s" in t else "") + f", total {t['total_s']:.2f} s",
+                 _wall_time_text(t),
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
                  + (f" ({self.idata.attrs.get('support_condition')})" if c["outside_support"] else ""),

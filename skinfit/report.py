@@ -147,7 +147,9 @@ def fit_diagnostics(fit, summary=None):
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.idata.attrs.get("map_log_density", float("nan"))),
         f"best of {len(starts)} optimiser runs, final status {starts[-1]['status'] if starts else 'n/a'}", "info")
-    add("wall time [s]", float(t["total_s"]), f"MAP {t['map_s']:.1f} s, sampling {t['sampling_s']:.1f} s", "info")
+    add("wall time [s]", float(t["total_s"]), f"MAP {t['map_s']:.1f} s, sampling {t['sampling_s']:.1f} s"
+        + (" (resumed from a checkpoint: this call's wall time; MAP in the first run, sampling over all runs)"
+           if t.get("resumed") else ""), "info")
     table = pd.DataFrame(rows, columns=["check", "value", "criterion", "status"]).set_index("check")
     return table, issues
 

@@ -176,6 +176,19 @@ def test_refused_when_settings_or_seed_changed(small_checkpoint):
         _resume(small_checkpoint, rng=3)
 
 
+def test_resumed_fit_reports_its_timings_as_resumed(small_checkpoint):
+    """A resumed fit ran no MAP or start itself: its wall-time line says so instead of printing
+    the first run's MAP minus this call's start (-0.08 s before the fix)."""
+    saved = load_checkpoint(small_checkpoint)
+    fit = _resume(small_checkpoint)
+    t = fit.attr("timings")
+    assert t["resumed"] and t["start_s"] == 0.0 and t["map_s"] == saved.map["seconds"]
+    assert t["sampling_s"] >= saved.seconds  # every run's sampling
+    line = next(x for x in fit.report_text().splitlines() if x.startswith("wall time"))
+    assert line.startswith(f"wall time: resumed from a checkpoint (MAP {saved.map['seconds']:.2f} s in the first run)")
+    assert "-" not in line
+
+
 def test_garbage_checkpoint_is_an_input_error(tmp_path):
     (tmp_path / "checkpoint.h5").write_bytes(b"\x89HDF\r\n\x1a\n truncated")
     with pytest.raises(InputError, match="not a readable skinfit checkpoint"):

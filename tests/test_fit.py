@@ -46,6 +46,9 @@ def test_summary_columns_and_diagnostics(ea_fit):
     text = ea_fit.report_text()
     for needle in ["converged: yes", "acceptance", "wall time", "outside the physical support", "tau0"]:
         assert needle in text
+    t = ea_fit.attr("timings")
+    assert not t["resumed"] and 0 < t["map_s"] < t["start_s"] < t["total_s"]  # start_s: MAP + importance start
+    assert f"importance start {t['start_s'] - t['map_s']:.2f} s" in text
 
 
 def test_result_tree_groups_and_provenance(ea_fit):
