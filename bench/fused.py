@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from skinfit.physics.ultrasonic import INTERP_MIN, INTERP_PER_DECADE, PHASES, _phase_nodes
+from skinfit.physics.ultrasonic import PHASES, _bracket_series, _interpolation, _rows
 
-__all__ = ["make_fused", "check_fused", "FAMILIES", "ultrasonic_nodes", "ultrasonic_interpolation"]
+__all__ = ["make_fused", "check_fused", "FAMILIES", "ultrasonic_interpolation"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -284,64 +284,24 @@ def _wavy_surface(post):
 
 
 # ---- ultrasonic ----------------------------------------------------------------------------
-def ultrasonic_nodes(x, m=PHASES):
-    """Quadrature nodes of the period average on the fixed covariates, as skinfit builds them
-    (skinfit.physics.ultrasonic.period_average): ``(speed, weight, start)``, flat over rows in row
-    order; row i owns nodes ``start[i]:start[i+1]`` (one node without vibration, 2m with)."""
-    velocity, angle, amp, freq = np.broadcast_arrays(x["velocity"], x["direction_angle"], x["amplitude_pp"],
-                                                     x["frequency"])
-    vf_x, vy = velocity * np.cos(angle), velocity * np.sin(angle)
-    amp_v = np.pi * freq * amp  # omega * A/2
-    still = amp_v == 0
-    speeds, weights = [], []
-    for i in range(len(velocity)):
-        if still[i]:
-            speeds.append(np.hypot(vf_x[i:i + 1], vy[i:i + 1]))
-            weights.append(np.ones(1))
-        else:
-            phases, w = _phase_nodes(vf_x[i:i + 1], vy[i:i + 1], amp_v[i:i + 1], m)
-            vx = vf_x[i] - amp_v[i] * np.cos(phases[0])
-            speeds.append(np.hypot(vx, np.full_like(vx, vy[i])))
-            weights.append(w[0])
-    start = np.cumsum([0] + [len(s) for s in speeds])[:-1]
-    return np.concatenate(speeds), np.concatenate(weights), start
-
-
-def ultrasonic_interpolation(x, m=PHASES):
-    """The period averages as skinfit takes them with parameters shared by all rows
-    (skinfit.physics.ultrasonic._interpolation), built here from :func:`ultrasonic_nodes`:
-    ``(speeds, matrix)``, mu_E at ``speeds`` (Chebyshev points in log speed over the moving
-    nodes, INTERP_PER_DECADE per decade) times ``matrix.T`` gives every row's average."""
-    speed, weight, start = ultrasonic_nodes(x, m)
-    used = (speed > 0.0) & (weight != 0.0)
-    s = np.log(np.where(used, speed, 1.0))
-    lo, hi = s[used].min(), s[used].max()
-    n = max(INTERP_MIN, math.ceil(INTERP_PER_DECADE * (hi - lo) / math.log(10.0)))
-    pts = lo + (hi - lo) * (1.0 - np.cos(np.pi * np.arange(n) / (n - 1))) / 2.0
-    b = (-1.0) ** np.arange(n)
-    b[0], b[-1] = b[0] / 2, b[-1] / 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        basis = b / (s[:, None] - pts)
-        basis /= basis.sum(axis=1, keepdims=True)
-    hit = s[:, None] == pts
-    basis[hit.any(axis=1)] = hit[hit.any(axis=1)]
-    basis *= np.where(used, weight, 0.0)[:, None]
-    return np.exp(pts), np.add.reduceat(basis, start, axis=0)
-
-
-def _bracket_series(s):
-    return s * (1 / 2 - s * (1 / 3 - s * (1 / 8 - s * (1 / 30 - s * (1 / 144 - s / 840)))))
+def ultrasonic_interpolation(x):
+    """skinfit's period averages with parameters shared by all rows, for covariates ``x``:
+    ``(1/c, c^2, matrix)``, mu_E at the interpolation speeds ``c`` times ``matrix.T`` gives every
+    row's average (skinfit.physics.ultrasonic._interpolation, computed once from the covariates,
+    outside the hot path; its accuracy against the reference quadrature is
+    tests/test_physics_ultrasonic.py's)."""
+    return _interpolation(*_rows(x), scalars=(PHASES, False))
 
 
 def _ultrasonic(post):
     """Period average of the distinct rows: mu_E at fixed interpolation speeds (they depend only
-    on the covariates) times one matrix."""
+    on the covariates) times one matrix (:func:`ultrasonic_interpolation`)."""
     _expect(post, ("mu_inf", "mu_0", "k_V", "q", "V0", "sigma"), ["log", "identity", "log", "log", "log", "log"],
             {"friction_coefficient": "normal"})
     xu, cnt, stats = _distinct(post)
     ybar, ssw = stats["friction_coefficient"]
-    speed, matrix = ultrasonic_interpolation(xu)
-    v2, inv, matrix_t = speed * speed, 1.0 / speed, np.ascontiguousarray(matrix.T)
+    inv, v2, matrix = ultrasonic_interpolation(xu)
+    matrix_t = np.ascontiguousarray(matrix.T)
     n = post.n
     const = -0.5 * n * _LOG_2PI
     prior, lo, hi = _prior(post)

@@ -33,12 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
+from skinfit.physics.ultrasonic import _bracket_series
+
 try:  # imported as bench.pymc_models, or as pymc_models from a script in bench/
     from .common import PeakRSS, Result, diagnostics
-    from .fused import _bracket_series, ultrasonic_interpolation
+    from .fused import ultrasonic_interpolation
 except ImportError:
     from common import PeakRSS, Result, diagnostics
-    from fused import _bracket_series, ultrasonic_interpolation
+    from fused import ultrasonic_interpolation
 
 __all__ = ["build_pymc", "check_pymc", "run_pymc", "float64_constants", "FORWARDS"]
 
@@ -165,14 +167,14 @@ def _ultrasonic(p, x, c):
     (fused.ultrasonic_interpolation)."""
     import pytensor.tensor as pt
 
-    v, matrix = ultrasonic_interpolation(x)
-    u = p["V0"] / v
+    inv_v, v2, matrix = ultrasonic_interpolation(x)
+    u = p["V0"] * inv_v
     e = pt.exp(-u)
     small = u < 1e-2  # series there (as skinfit); both sides see a harmless argument
     us = pt.where(small, u, 0.0)
     ul = pt.where(small, 1.0, u)
     bracket = pt.where(small, _bracket_series(us), -pt.expm1(-ul) / ul - e)  # the series: arithmetic alone
-    mu_star = p["mu_inf"] + (p["mu_inf"] - p["mu_0"]) * pt.exp(-(v**2) / p["k_V"])
+    mu_star = p["mu_inf"] + (p["mu_inf"] - p["mu_0"]) * pt.exp(-v2 / p["k_V"])
     mu_e = 2.0 * mu_star * (p["q"] + 1.0) * bracket / (1.0 + p["q"] - e)
     return {"friction_coefficient": pt.dot(matrix, mu_e)}, {}, 2.0 * p["mu_inf"] - p["mu_0"] > 0.0
 

@@ -35,6 +35,7 @@ def test_cached_arrays_are_read_only(rng):
     state = textured.contact_state(p, x, c)
     with pytest.raises(ValueError, match="read-only"):
         state["ok"][0] = False
-    inv_v = ultrasonic._flat_nodes(_setup("ultrasonic", "ultrasonic_synthetic", rng)[0], ultrasonic.PHASES, False)[0]
+    x = _setup("ultrasonic", "ultrasonic_synthetic", rng)[0]
+    inv_v = ultrasonic._nodes(*ultrasonic._rows(x), scalars=(ultrasonic.PHASES, False))[0]
     with pytest.raises(ValueError, match="read-only"):
         inv_v[0] = 0.0

@@ -191,7 +191,8 @@ def _rows(x):
 BLOCK_CELLS = 131072
 
 
-def _flat_nodes(x, m, projected):
+@by_value
+def _nodes(velocity, angle, amplitude_pp, frequency, m, projected):
     """The period average's nodes, flattened over rows: (1/speed, speed^2, weight, start, counts).
 
     Row r owns nodes ``start[r]:start[r] + counts[r]`` (one for a row without vibration, ``2m``
@@ -199,11 +200,6 @@ def _flat_nodes(x, m, projected):
     placeholder speeds; with ``projected`` the weights carry ``(v_r . u_f)/|v_r|``.  They
     depend on the covariates alone and are cached by their values.
     """
-    return _nodes(*_rows(x), scalars=(m, projected))
-
-
-@by_value
-def _nodes(velocity, angle, amplitude_pp, frequency, m, projected):
     velocity, angle, amplitude_pp, frequency = (a.ravel() for a in (velocity, angle, amplitude_pp, frequency))
     still, vf_x, vy, vx_moving, w_moving = _eq5(velocity, angle, amplitude_pp, frequency, m)
     counts = np.where(still, 1, 2 * m)
@@ -272,7 +268,7 @@ def _average(p, x, *, projected=False, constant_mu=False, m=PHASES):
 
     Parameters shared by all rows: mu at the interpolation points of :func:`_interpolation`
     and one matrix product (shipped design, 16 posterior draws: 0.08 ms against 0.66 ms on the
-    nodes). Parameters per row: on the flat nodes of :func:`_flat_nodes`, in blocks of
+    nodes). Parameters per row: on the flat nodes of :func:`_nodes`, in blocks of
     :data:`BLOCK_CELLS` cells, reduced per row. The same equations (:func:`_eq3`,
     :func:`_eq4`) as :func:`period_average` of :func:`mu_equilibrium`
     (tests/test_physics_ultrasonic.py), which evaluates (k, rows, nodes) arrays and took
@@ -283,7 +279,7 @@ def _average(p, x, *, projected=False, constant_mu=False, m=PHASES):
         inv_c, c2, matrix = _interpolation(*_rows(x), scalars=(m, projected))
         star = params["mu_plus"] if constant_mu else _eq4(c2, params["mu_inf"], params["mu_0"], params["k_V"])
         return _eq3(inv_c, star, params["q"], params["V0"]) @ matrix.T
-    inv_v, v2, weight, start, counts = _flat_nodes(x, m, projected)
+    inv_v, v2, weight, start, counts = _nodes(*_rows(x), scalars=(m, projected))
     n = len(start)
     for name, v in params.items():
         if v.shape[1] > 1:
