@@ -27,7 +27,7 @@ import skinfit
 from skinfit.fit import default_walkers, start
 from skinfit.moves import IndependenceMove
 from skinfit.posterior import Posterior
-from skinfit.sampling import _adapt, adaptive_moves
+from skinfit.sampling import INDEPENDENCE_SUBSTEPS, _adapt, adaptive_moves
 
 ESS_TARGET = 400
 RHAT_MAX = 1.01
@@ -151,7 +151,7 @@ def run_bare_emcee(model, dataset, priors, seed, sampler_record):
         post = Posterior(model, priors, dataset)
         map_result, proposal, p0, emcee_seed = fit_start(post, seed)
         t_start = time.perf_counter() - t0
-        move = IndependenceMove(proposal)
+        move = IndependenceMove(proposal, INDEPENDENCE_SUBSTEPS)
         sampler = emcee.EnsembleSampler(len(p0), post.ndim, post, vectorize=True, moves=adaptive_moves(move))
         state = emcee.State(p0, random_state=np.random.RandomState(emcee_seed).get_state())
         refits = [a["step"] for a in sampler_record["adaptation"] if a["refit"]]

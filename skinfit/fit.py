@@ -103,7 +103,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
 
         settings = {"ess_target": ess_target, "max_steps": max_steps, "n_global": n_global,
-                    "n_local": n_local, "n_prior_draws": n_prior_draws}
+                    "n_local": n_local, "n_prior_draws": n_prior_draws, "moves": describe_moves()}
         ckpt = Checkpoint(checkpoint, run_identity(post, seed=seed, nwalkers=nwalkers, settings=settings),
                           interval=checkpoint_every)
         if resume and Path(checkpoint).exists():
@@ -141,7 +141,11 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
 
 
 #: Steps between the first convergence checks of a fit (the interval grows to 10% of the chain).
-CHECK_EVERY = 100
+#: 50: with three independence updates a step the shipped posteriors converge after 100-250
+#: steps (ultrasonic 450-1000), a step costs 0.6-0.8 ms and a check 0.5-2 ms, 7-15 ms once it
+#: computes R-hat (when the other criteria pass) (electroadhesion, median of 6 seeds: 200 ->
+#: 150 steps, sampling 0.12 -> 0.10 s).
+CHECK_EVERY = 50
 
 
 def start(post, rng, *, nwalkers, n_global=2000, n_local=4):

@@ -8,8 +8,9 @@ How a fit samples (:func:`skinfit.fit.start`, :func:`importance_start`, :func:`r
    three rounds.  The walkers are drawn from the weighted draws, so they start in the
    typical set.
 2. emcee runs with :class:`~skinfit.moves.IndependenceMove` (80% of steps: every walker
-   proposes a fresh draw of the mixture, one call for the whole ensemble) and
-   :class:`~skinfit.moves.DEMove` (20%: local mixing where the mixture fits poorly).
+   makes three independence updates in a row from fresh draws of the mixture, all drawn and
+   evaluated in one call for the whole ensemble) and :class:`~skinfit.moves.DEMove` (20%:
+   local mixing where the mixture fits poorly).
 3. At step 100, then 200, 400, ... while the run has not converged (checked first), the
    mixture is refitted to the second half of the chain (1, 3 or 6 components, chosen on
    held-out walkers) unless the chain since the last refit already mixes well (tau <= 10).
@@ -25,7 +26,8 @@ How a fit samples (:func:`skinfit.fit.start`, :func:`importance_start`, :func:`r
 Measured on the five shipped posteriors (5 seeds each, this 2-CPU machine; bench/results/):
 the largest integrated autocorrelation time fell from 23-69 steps (DE and snooker moves,
 the previous engine) to 3-10, and a converged electroadhesion fit from 2.7-3.9k steps
-(~6 s) to 400-700 steps (0.5-0.8 s).  An independence sampler is only as good as its
+(~6 s) to 400-700 steps (0.5-0.8 s); three independence updates a step then took it to
+150-250 steps (0.09-0.16 s of sampling, 6 seeds).  An independence sampler is only as good as its
 proposal's tails: a walker in a region where the posterior is much larger than the mixture
 rejects for many steps; DE moves, refits and the R-hat gate over walkers guard against it,
 and tests/test_moves.py checks that the move is exact on a known target from a mismatched
@@ -67,6 +69,16 @@ IMPORTANCE_GOOD = 0.5
 COMPONENT_CHOICES = (1, 3, 6)
 #: Share of steps that are independence moves (the rest: differential evolution).
 INDEPENDENCE_WEIGHT = 0.8
+#: Independence updates per independence step, evaluated in one call
+#: (:class:`~skinfit.moves.IndependenceMove`).  Chosen by measurement, median sampling
+#: seconds over 6 seeds on each shipped posterior (this 2-CPU machine, checks every 100
+#: steps), with 1 / 2 / 3 / 4 updates: electroadhesion 0.21 / 0.17 / 0.12 / 0.13,
+#: textured_surface 0.23 / 0.22 / 0.17 / 0.20, wavy_surface 1.08 / 1.05 / 0.89 / 1.07,
+#: contact_area 0.14 / 0.10 / 0.09 / 0.13, ultrasonic 0.52 / 0.62 / 0.42 / 0.45; with 3 and
+#: checks every 50 steps (:data:`skinfit.fit.CHECK_EVERY`): 0.10, 0.17, -, 0.08, 0.39.
+INDEPENDENCE_SUBSTEPS = 3
+#: Key of the sampler's evaluation count in a checkpoint's counts.
+SAMPLER_EVALUATIONS = "sampler_evaluations"
 
 
 @dataclass(frozen=True)
@@ -159,10 +171,10 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     t0 = time.perf_counter()
     nwalkers, d = p0.shape
     seed = int(rng.integers(2**32 - 1))
-    indep = IndependenceMove(proposal) if proposal is not None else None
+    indep = IndependenceMove(proposal, INDEPENDENCE_SUBSTEPS) if proposal is not None else None
     if moves is None:
         moves = default_moves() if indep is None else adaptive_moves(indep)
-    backend, spent = emcee.backends.Backend(), 0.0
+    backend, spent, evaluated = emcee.backends.Backend(), 0.0, [0]
     state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     if resume is not None and resume.iteration > 0:
         backend.reset(nwalkers, d)
@@ -172,10 +184,18 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         backend.iteration, backend.random_state = resume.iteration, resume.random_state
         state = emcee.State(resume.chain[-1], log_prob=resume.log_prob[-1], random_state=resume.random_state)
         spent = resume.seconds
+        saved = dict(resume.counts)
+        # checkpoints written before the count was saved: one evaluation per walker and step
+        evaluated[0] = saved.pop(SAMPLER_EVALUATIONS, resume.iteration * nwalkers)
         if hasattr(post, "counts"):
-            post.counts.update(resume.counts)
+            post.counts.update(saved)
+
+    def log_prob(z):  # the target, counting its evaluations (moves make 1 to k a walker and step)
+        evaluated[0] += len(z)
+        return post(z)
+
     sampler_class = _Sampler if checkpoint is None else emcee.EnsembleSampler
-    sampler = sampler_class(nwalkers, d, post, vectorize=True, moves=moves, backend=backend)
+    sampler = sampler_class(nwalkers, d, log_prob, vectorize=True, moves=moves, backend=backend)
     n = backend.iteration
     history, start = [], 0  # refits so far; the chain is homogeneous from ``start`` on
     next_adapt = ADAPT_FIRST if indep is not None and ADAPT_FIRST < max_steps else None
@@ -184,8 +204,8 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     while next_adapt is not None and next_adapt < n:
         start, next_adapt = _apply_refit(indep, backend.get_chain(), next_adapt, start, seed, proposal.nu,
                                          history, max_steps)
-    # the evaluation counters as of the last completed step (targets without them: none)
-    counts = dict(getattr(post, "counts", {}))
+    # the evaluation counters as of the last completed step
+    counts = {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated[0]}
 
     def save():
         if checkpoint is not None:
@@ -203,7 +223,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
             target = min([c for c in checks if c >= n] + ([next_adapt] if next_adapt is not None else []))
             if target > n:
                 for state in sampler.sample(state, iterations=target - n):
-                    counts = dict(getattr(post, "counts", {}))
+                    counts = {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated[0]}
                     if bar is not None:
                         bar.update(1)
                     if checkpoint is not None and checkpoint.due():
@@ -236,13 +256,14 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     return SamplerRun(chain=kept, log_prob=logp[burn::thin].T, tau=tau, ess_emcee=ess, rhat_max=rhat,
                       acceptance=np.asarray(sampler.acceptance_fraction), n_steps=n, burn=burn,
                       thin=thin, converged=not reasons, reasons=tuple(reasons),
-                      seconds=spent + time.perf_counter() - t0, evaluations=n * nwalkers,
+                      seconds=spent + time.perf_counter() - t0, evaluations=evaluated[0],
                       adaptation=tuple(history))
 
 
 def describe_moves():
     """The moves of :func:`adaptive_moves`, in words (stored with every fit)."""
-    return (f"skinfit.moves.IndependenceMove (mixture of Student-t, refitted) {INDEPENDENCE_WEIGHT:g} + "
+    return (f"skinfit.moves.IndependenceMove (mixture of Student-t, refitted; {INDEPENDENCE_SUBSTEPS} updates "
+            f"a step) {INDEPENDENCE_WEIGHT:g} + "
             f"skinfit.moves.DEMove {1 - INDEPENDENCE_WEIGHT:g}")
 
 

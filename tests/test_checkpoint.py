@@ -120,6 +120,7 @@ def test_resume_after_interrupt_inside_a_step_mid_interval(adaptive, stop_after)
     assert not adaptive or any(a["refit"] for a in full.adaptation)
     assert np.array_equal(resumed.chain, full.chain) and np.array_equal(resumed.log_prob, full.log_prob)
     assert np.array_equal(resumed.acceptance, full.acceptance) and resumed.n_steps == full.n_steps == 700
+    assert resumed.evaluations == full.evaluations  # counted across the interrupt (1 to 3 a walker and step)
 
 
 def test_check_points_do_not_depend_on_time():

@@ -73,8 +73,9 @@ def test_adaptive_run_is_exact_and_refits_on_schedule(rng):
     target = _Gaussian()
     start = MixtureT([1.0], (target.mean + 2)[None], np.eye(4)[None])
     p0 = target.mean + rng.normal(size=(32, 4))
-    run = run_emcee(target, p0, rng, proposal=start, ess_target=2000, check_every=100)
+    run = run_emcee(target, p0, rng, proposal=start, ess_target=8000, check_every=100)
     assert run.converged
+    assert run.evaluations == target.counts["evaluations"] > 32 * run.n_steps  # three a walker per independence step
     steps = [a["step"] for a in run.adaptation]
     assert steps[:2] == [ADAPT_FIRST, 2 * ADAPT_FIRST] and steps == [ADAPT_FIRST * 2**i for i in range(len(steps))]
     last_refit = max(a["step"] for a in run.adaptation if a["refit"])
