@@ -11,9 +11,9 @@ How a fit samples (:func:`skinfit.fit.start`, :func:`importance_start`, :func:`r
    makes three independence updates in a row from fresh draws of the mixture, all drawn and
    evaluated in one call for the whole ensemble) and :class:`~skinfit.moves.DEMove` (20%:
    local mixing where the mixture fits poorly).
-3. At step 100, then 200, 400, ... while the run has not converged (checked first), the
+3. At step 50, then 100, 200, ... while the run has not converged (checked first), the
    mixture is refitted to the second half of the chain (1, 3 or 6 components, chosen on
-   held-out walkers) unless the chain since the last refit already mixes well (tau <= 10).
+   held-out walkers) unless the chain since the last refit already mixes well (tau <= 4).
    Only the chain after the last refit, a time-homogeneous Markov chain, is judged and kept.
    (Tried and not adopted, 4 seeds each: up to 10 components, and keeping a chain that needs
    fewer further steps than a restarted one, both within the seed-to-seed spread on textured
@@ -55,9 +55,15 @@ __all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "adaptive_
 
 #: First step at which the independence proposal is refitted to the chain; later refits at
 #: twice the previous step, for as long as the run has not converged.
-ADAPT_FIRST = 100
+ADAPT_FIRST = 50
 #: No refit while the chain since the last one mixes this well (autocorrelation time, steps).
-TAU_KEEP = 10.0
+#: With three independence updates a step a well-fitted proposal gives 2-3.5 on the shipped
+#: posteriors.  Chosen with :data:`ADAPT_FIRST` by measurement, median sampling seconds over
+#: 8 seeds on ultrasonic (the posterior that refits): (10, 100) 0.40 (steps 400-972),
+#: (5, 100) 0.34, (5, 50) 0.30, (4, 50) 0.29 (250-400 steps), (3, 50) 0.30, (4, 25) 0.30;
+#: over 6 seeds, (10, 100) -> (4, 50): electroadhesion_uniform 1.04 -> 0.89, wavy_surface
+#: 0.90 -> 0.88, the three that never refit unchanged.
+TAU_KEEP = 4.0
 #: Importance sampling before the chain (:func:`importance_start`): draws per round, rounds,
 #: the effective sample size below which the weights are too degenerate to refit to, and the
 #: share of the draws above which the proposal is good enough.

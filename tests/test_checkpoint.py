@@ -79,7 +79,7 @@ def test_sigkill_then_resume_equals_uninterrupted_run(reference, tmp_path):
 def test_resume_after_interrupt_inside_a_step_mid_interval(adaptive, stop_after):
     """A KeyboardInterrupt raised inside a log-density evaluation, between convergence checks:
     the checkpoint holds the last completed step, and resuming reproduces the full chain.  With
-    the adaptive independence proposal the interrupt lands after two refits (steps 100, 200),
+    the adaptive independence proposal the interrupt lands after the refit steps 50, 100 and 200,
     which the resumed run recomputes from the saved chain."""
     post = Posterior(skinfit.load_model(MODEL), skinfit.load_priors(MODEL), skinfit.load_dataset(DATA))
 

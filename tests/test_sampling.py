@@ -68,8 +68,8 @@ class _Gaussian:
 
 def test_adaptive_run_is_exact_and_refits_on_schedule(rng):
     """From a poor starting proposal (the wrong mean, no correlations) the refitted proposal
-    samples the target: moments within 5 Monte Carlo errors; refits at 100, 200, ... until
-    converged, and the kept chain starts after the last one."""
+    samples the target: moments within 5 Monte Carlo errors; refits at ADAPT_FIRST, twice
+    that, ... until converged, and the kept chain starts after the last one."""
     target = _Gaussian()
     start = MixtureT([1.0], (target.mean + 2)[None], np.eye(4)[None])
     p0 = target.mean + rng.normal(size=(32, 4))
