@@ -119,7 +119,7 @@ def bench(name, args, old):
     for k in (32, 128):
         z = post.to_z(draws[np.linspace(0, len(draws) - 1, k).astype(int)])
         check_fused(post, fused, z)
-        thr.append((k, throughput(post, z), throughput(fused, z)))
+        thr.append((k, *throughput((post, fused), z)))
 
     repeats = [run_skinfit(*loaded, priors, args.seed + i) for i in range(1, args.repeats + 1)]
     walls = np.array([sk.wall_s] + [r.wall_s for r in repeats])
@@ -194,7 +194,7 @@ def write_summary(results, info):
              "min bulk ESS >= 400), methods in one process, one run; a method marked 'run of DATE' was skipped "
              "in the row's latest run and is that earlier run's figure, its ratio taken against the latest skinfit "
              "time. The overhead compares the fastest of `--pairs` (5) alternating runs of skinfit and of the bare loop "
-             "on the same chain; fused / skinfit the best of 4 throughput runs of each.", "", machine_text(info), "",
+             "on the same chain; fused / skinfit the best of 4 alternating throughput runs of each.", "", machine_text(info), "",
              "| posterior | rows (distinct), params | skinfit s | PyMC NUTS s (x) | dynesty s (x) | plain emcee DE s (x) "
              "| ESS/s | overhead vs bare loop: to samples / with tree | fused / skinfit (32, 128 walkers) "
              "| skinfit over seeds: median [range] s |", "|---|---|---|---|---|---|---|---|---|---|"]

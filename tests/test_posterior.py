@@ -104,14 +104,23 @@ def test_new_coordinates_are_finite_at_a_zero_bound_and_exact(rng):
     np.testing.assert_allclose(post(z), post.log_density(theta) + post.log_jacobian(z), rtol=1e-12)
 
 
-def test_large_ensembles_are_evaluated_in_blocks_with_equal_results(rng):
-    """More than CHUNK parameter vectors are evaluated block by block (memory of quadrature
-    models); totals, pointwise values, predictions and validity equal one single call's."""
-    post = _posterior("ultrasonic")
-    theta = post.sample_prior(600, rng)
+@pytest.mark.parametrize("model, k, blocks", [("ultrasonic", 600, 3), ("wavy_surface", 96, 2)])
+def test_large_ensembles_are_evaluated_in_blocks_with_equal_results(rng, model, k, blocks):
+    """More than CHUNK parameter vectors (memory of quadrature models), or more than
+    EVAL_CELLS cells of vectors x distinct rows (cache: wavy_surface's 720 rows, 68 vectors),
+    are evaluated in equal blocks; totals, pointwise values, predictions and validity equal
+    one single call's."""
+    post = _posterior(model)
+    theta = post.sample_prior(k, rng)
+    sizes = []
+    block = post._evaluate_block
+    post._evaluate_block = lambda t, *a: sizes.append(len(t)) or block(t, *a)
+    post.log_likelihood(theta)
+    del post._evaluate_block
+    assert sizes == [-(-k // blocks)] * (blocks - 1) + [k - (blocks - 1) * -(-k // blocks)]
     blocked = post.log_likelihood(theta), post.pointwise(theta)
     single = Posterior(post.model, post.priors, post.dataset)
-    single.CHUNK = 10**6
+    single.CHUNK = single.EVAL_CELLS = 10**9
     np.testing.assert_array_equal(blocked[0], single.log_likelihood(theta))
     ll, pred, valid = single.pointwise(theta)
     for o in ll:
