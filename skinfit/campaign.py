@@ -34,7 +34,8 @@ number of workers, the order of completion nor on which other fits the campaign 
 Results go to ``out/<model>/<dataset>/<group>/fit.nc`` (written atomically by
 :meth:`skinfit.Fit.save`) with ``summary.csv`` and ``task.json`` (the fit's specification,
 written after the result).  A fit is complete when its ``task.json`` matches the current
-specification and its ``fit.nc`` opens with the same seed; a restarted campaign (after a
+specification (model card, priors and data hashes, options, seed and the sampler's settings,
+:func:`skinfit.sampling.sampler_settings`) and its ``fit.nc`` opens with the same seed; a restarted campaign (after a
 crash or a kill) skips complete fits and runs only the others.  ``out/index.csv`` and
 ``out/index.json`` list every fit (status, seconds, converged, worker, peak memory), rewritten
 after each result; ``out/campaign.log`` records what each run started, skipped and finished.
@@ -66,6 +67,7 @@ from .fit import fit
 from .groups import _write_json, derive_seed, group_dir, group_labels
 from .models import NOISE_MODELS, load_model
 from .priors import load_priors
+from .sampling import sampler_settings
 
 __all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit", "cli_campaign"]
 
@@ -176,7 +178,7 @@ def load_campaign(path):
         splits[name] = split or None
 
     by = _str_list(doc, "by", where, required=False)
-    tasks = []
+    tasks, sampler = [], sampler_settings()
     for i, name in enumerate(_str_list(doc, "datasets", where)):
         ref = _resolve(name, base)
         try:
@@ -201,9 +203,11 @@ def load_campaign(path):
                               "dataset_ref": ref, "by": by, "group": label,
                               "seed": derive_seed(seed, model.id, dataset.id, label),
                               "priors": priors[mname], "split": splits[mname], "options": options,
-                              # an edited card, prior file or data file makes the fit run again
+                              # an edited card, prior file or data file, or another sampler,
+                              # makes the fit run again
                               "sha256": {"model": model.sha256, "priors": prior_hashes[mname],
                                          "dataset": dataset.sha256},
+                              "sampler": sampler,
                               "path": str(out / rel)})
     return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers)
 

@@ -81,16 +81,23 @@ def _run_one(item, path):
 
 
 def _done(path, item):
-    """A saved fit with this item's seed on the same data (an edited dataset is fitted again)."""
+    """A saved fit with this item's seed on the same data, model card, priors and sampler
+    settings (an edited file, or another sampler, and the item is fitted again)."""
     if not path.exists():
         return False
     from .data import load_dataset
     from .fit import load_fit
+    from .models import load_model
+    from .priors import load_priors
+    from .sampling import sampler_settings
 
     try:
         attrs = load_fit(path).idata.attrs
         data = _select(load_dataset(item["dataset"]), item["rows"])
-        return int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
+        return (int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
+                and attrs.get("model_sha256") == load_model(item["model"]).sha256
+                and attrs.get("priors_sha256") == load_priors(item["model"]).sha256
+                and json.loads(attrs.get("sampler", "{}")).get("settings") == sampler_settings())
     except Exception:  # a damaged or foreign file: fit again
         return False
 

@@ -27,7 +27,7 @@ from .posterior import Posterior, _level_labels
 from .priors import PriorSet, load_priors
 from .proposal import MixtureT
 from .guardrails import check_run
-from .sampling import describe_moves, importance_start, initial_ball, run_emcee
+from .sampling import describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
 
@@ -103,7 +103,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
 
         settings = {"ess_target": ess_target, "max_steps": max_steps, "n_global": n_global,
-                    "n_local": n_local, "n_prior_draws": n_prior_draws, "moves": describe_moves()}
+                    "n_local": n_local, "n_prior_draws": n_prior_draws, "sampler": sampler_settings()}
         ckpt = Checkpoint(checkpoint, run_identity(post, seed=seed, nwalkers=nwalkers, settings=settings),
                           interval=checkpoint_every)
         if resume and Path(checkpoint).exists():
@@ -219,7 +219,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
         "optimizer": json.dumps({"starts": list(map_result.starts), "evaluations": map_result.evaluations}),
         "sampler": json.dumps({
             "nwalkers": nw, "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin,
-            "moves": describe_moves(), "tau": dict(zip(post.names, run.tau.tolist())),
+            "moves": describe_moves(), "settings": sampler_settings(), "tau": dict(zip(post.names, run.tau.tolist())),
             "ess_emcee": dict(zip(post.names, run.ess_emcee.tolist())), "rhat_max": run.rhat_max,
             "importance": list(importance), "adaptation": list(run.adaptation),
             "acceptance_mean": float(run.acceptance.mean()), "acceptance_min": float(run.acceptance.min()),

@@ -51,7 +51,8 @@ import numpy as np
 from .moves import DEMove, IndependenceMove, default_moves
 from .proposal import fit_mixture, select_mixture
 
-__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "adaptive_moves", "describe_moves", "importance_start"]
+__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "adaptive_moves", "describe_moves", "importance_start",
+           "sampler_settings"]
 
 #: First step at which the independence proposal is refitted to the chain; later refits at
 #: twice the previous step, for as long as the run has not converged.
@@ -264,6 +265,17 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
                       thin=thin, converged=not reasons, reasons=tuple(reasons),
                       seconds=spent + time.perf_counter() - t0, evaluations=evaluated[0],
                       adaptation=tuple(history))
+
+
+def sampler_settings():
+    """The sampler's fixed settings (moves, refit schedule, importance start, check interval):
+    part of what a campaign fit and a checkpoint belong to, so that neither is reused by a
+    skinfit whose sampler differs (it would not give the same samples for the same seed)."""
+    from .fit import CHECK_EVERY
+
+    return {"moves": describe_moves(), "check_every": CHECK_EVERY, "adapt_first": ADAPT_FIRST, "tau_keep": TAU_KEEP,
+            "components": list(COMPONENT_CHOICES), "importance": [IMPORTANCE_SIZE, IMPORTANCE_ROUNDS,
+                                                                   IMPORTANCE_MIN_ESS, IMPORTANCE_GOOD]}
 
 
 def describe_moves():

@@ -194,3 +194,15 @@ def test_edited_data_makes_the_fit_run_again(tmp_path):
     last[-1] = str(float(last[-1]) * 1.01)
     csv.write_text("\n".join(lines[:-1] + [",".join(last)]) + "\n")
     assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["done"]
+
+
+def test_another_sampler_makes_the_fit_run_again(tmp_path, monkeypatch):
+    """A finished fit is not reused by a skinfit whose sampler differs (same seed, other samples)."""
+    from skinfit import sampling
+
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "sampler")
+    assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["done"]
+    monkeypatch.setattr(sampling, "INDEPENDENCE_SUBSTEPS", 2)
+    assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["done"]
+    assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["complete"]

@@ -18,7 +18,7 @@ def test_plan_covers_every_shipped_dataset_with_its_variants():
     assert [p["seed"] for p in demo_plan(seed=1)] == seeds != [p["seed"] for p in demo_plan(seed=2)]
 
 
-def test_demo_fits_compares_and_reports(tmp_path, capsys):
+def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic", "--jobs", "2"]) == 0
     text = capsys.readouterr().out
@@ -34,3 +34,9 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys):
     # a second run reuses the saved fits
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic"]) == 0
     assert "(3 already done" in capsys.readouterr().out
+    # ... but not under another sampler (the same seed would give other samples)
+    from skinfit import demo, sampling
+
+    monkeypatch.setattr(sampling, "TAU_KEEP", 5.0)
+    item = next(p for p in plan if p["model"] == "electroadhesion")
+    assert not demo._done(out / item["dataset"] / item["model"] / "fit.nc", item)
