@@ -101,7 +101,8 @@ class IndependenceMove(Move):
     20:616, "Using parallel computation to improve independent Metropolis-Hastings based
     estimation"): the same Markov chain as k separate steps, for the cost of one call on k
     times the points: for 96 points against 32, 1.4-2x the time on four shipped posteriors and
-    3.7x on wavy_surface (best of 5 x 100 calls; skinfit/sampling.py).  The step counts as accepted for a walker when any of its k
+    2.2-3.9x on wavy_surface, whose cost depends on the draws (best of 5 x 100 calls;
+    skinfit/sampling.py).  The step counts as accepted for a walker when any of its k
     updates was.
 
     ``g`` must not depend on the current walkers: the sampler replaces it only between runs of
