@@ -27,7 +27,7 @@ from .posterior import Posterior, _level_labels
 from .priors import PriorSet, load_priors
 from .proposal import MixtureT
 from .guardrails import check_run
-from .sampling import describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
+from .sampling import CHECK_EVERY, describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
 
@@ -138,14 +138,6 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
     return Fit(idata, posterior=post)
-
-
-#: Steps between the first convergence checks of a fit (the interval grows to 10% of the chain).
-#: 50: with three independence updates a step the shipped posteriors converge after 100-250
-#: steps (ultrasonic 450-1000), a step costs 0.6-0.8 ms and a check 0.5-2 ms, 7-15 ms once it
-#: computes R-hat (when the other criteria pass) (electroadhesion, median of 6 seeds: 200 ->
-#: 150 steps, sampling 0.12 -> 0.10 s).
-CHECK_EVERY = 50
 
 
 def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
