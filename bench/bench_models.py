@@ -119,7 +119,7 @@ def bench(name, args, old):
     for k in (32, 128):
         z = post.to_z(draws[np.linspace(0, len(draws) - 1, k).astype(int)])
         check_fused(post, fused, z)
-        thr.append((k, *throughput((post, fused), z)))
+        thr.append((k, *throughput([post, fused], z)))
 
     repeats = [run_skinfit(*loaded, priors, args.seed + i) for i in range(1, args.repeats + 1)]
     walls = np.array([sk.wall_s] + [r.wall_s for r in repeats])

@@ -49,7 +49,7 @@ def main():
         post = Posterior(model, priors, ds)
         z = post.to_z(post.sample_prior(4000, rng))
         z = z[np.isfinite(post(z))][:64]
-        per_eval = {k: 1e6 / throughput(post, z[:k]) for k in (32, 64)}
+        per_eval = {k: 1e6 / throughput([post], z[:k])[0] for k in (32, 64)}
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

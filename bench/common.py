@@ -25,9 +25,8 @@ import numpy as np
 
 import skinfit
 from skinfit.fit import default_walkers, start
-from skinfit.moves import IndependenceMove
 from skinfit.posterior import Posterior
-from skinfit.sampling import INDEPENDENCE_SUBSTEPS, _adapt, adaptive_moves
+from skinfit.sampling import _adapt, adaptive_moves, independence_move
 
 ESS_TARGET = 400
 RHAT_MAX = 1.01
@@ -151,7 +150,7 @@ def run_bare_emcee(model, dataset, priors, seed, sampler_record):
         post = Posterior(model, priors, dataset)
         map_result, proposal, p0, emcee_seed = fit_start(post, seed)
         t_start = time.perf_counter() - t0
-        move = IndependenceMove(proposal, INDEPENDENCE_SUBSTEPS)
+        move = independence_move(proposal)
         sampler = emcee.EnsembleSampler(len(p0), post.ndim, post, vectorize=True, moves=adaptive_moves(move))
         state = emcee.State(p0, random_state=np.random.RandomState(emcee_seed).get_state())
         refits = [a["step"] for a in sampler_record["adaptation"] if a["refit"]]
@@ -234,14 +233,12 @@ def run_dynesty(post, seed, nlive=400, sample="rslice", maxcall=None):
 
 
 def throughput(funcs, z, seconds=0.5, repeats=4):
-    """Log-density evaluations per second of each of ``funcs`` (a function or a sequence of
-    them) on the ensemble ``z`` (k, d): the best of ``repeats`` runs of ``seconds`` each (as
+    """Log-density evaluations per second of each of the functions ``funcs`` on the ensemble
+    ``z`` (k, d), a list: the best of ``repeats`` runs of ``seconds`` each (as
     ``timeit`` takes the minimum), the functions' runs alternating, so that a change of load on
     this shared machine meets all of them (run one after the other, single runs of the same
     code varied by 1.6-2.3x in their ratio to the fused expression, and the best of four by
     1.65-2.11 on contact_area in three runs of one day)."""
-    single = callable(funcs)
-    funcs = [funcs] if single else list(funcs)
     best = [0.0] * len(funcs)
     for f in funcs:
         f(z)
@@ -252,7 +249,7 @@ def throughput(funcs, z, seconds=0.5, repeats=4):
                 f(z)
                 n += 1
             best[i] = max(best[i], n * len(z) / (time.perf_counter() - t0))
-    return best[0] if single else best
+    return best
 
 
 def table(rows):

@@ -35,8 +35,8 @@ Results go to ``out/<model>/<dataset>/<group>/fit.nc`` (written atomically by
 :meth:`skinfit.Fit.save`) with ``summary.csv`` and ``task.json`` (the fit's specification,
 written after the result).  A fit is complete when its ``task.json`` matches the current
 specification (model card, priors and data hashes, options, seed and the sampler's settings,
-:func:`skinfit.sampling.sampler_settings`) and its ``fit.nc`` opens with the same seed; a restarted campaign (after a
-crash or a kill) skips complete fits and runs only the others.  ``out/index.csv`` and
+:func:`skinfit.sampling.sampler_settings`) and its ``fit.nc`` opens with the same seed; a
+restarted campaign (after a crash or a kill) skips complete fits and runs only the others.  ``out/index.csv`` and
 ``out/index.json`` list every fit (status, seconds, converged, worker, peak memory), rewritten
 after each result; ``out/campaign.log`` records what each run started, skipped and finished.
 

@@ -92,12 +92,13 @@ def _done(path, item):
     from .sampling import sampler_settings
 
     try:
-        attrs = load_fit(path).idata.attrs
+        saved = load_fit(path)
+        attrs = saved.idata.attrs
         data = _select(load_dataset(item["dataset"]), item["rows"])
         return (int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
                 and attrs.get("model_sha256") == load_model(item["model"]).sha256
                 and attrs.get("priors_sha256") == load_priors(item["model"]).sha256
-                and json.loads(attrs.get("sampler", "{}")).get("settings") == sampler_settings())
+                and saved.attr("sampler").get("settings") == sampler_settings())
     except Exception:  # a damaged or foreign file: fit again
         return False
 

@@ -342,17 +342,17 @@ class Posterior:
         """:meth:`_evaluate_block` over equal blocks of at most ``CHUNK`` parameter vectors
         and :attr:`EVAL_CELLS` / distinct rows (at least 16).
 
-        Keeps the forward model's arrays in cache, and bounds memory where a model's forward function works on larger arrays than (k, n)
-        (the ultrasonic period average with a parameter split by a column takes its per-row
-        values to every quadrature node, (k, 6734) on the shipped rows: 2000 prior draws peak
-        at 336 MB of numpy arrays in one call, 47 MB in blocks; with shared parameters 13 and
-        2 MB).
+        Keeps the forward model's arrays in cache, and bounds memory where a model's forward
+        function works on larger arrays than (k, n) (the ultrasonic period average with a
+        parameter split by a column takes its per-row values to every quadrature node,
+        (k, 6734) on the shipped rows: 2000 prior draws peak at 336 MB of numpy arrays in one
+        call, 47 MB in blocks; with shared parameters 13 and 2 MB).
         """
         k = len(theta)
         most = min(self.CHUNK, max(16, self.EVAL_CELLS // self.n_unique))
         if k <= most:
             return self._evaluate_block(theta, pointwise, predict)
-        size = -(-k // -(-k // most))  # ceil(k / number of blocks)
+        size = math.ceil(k / math.ceil(k / most))
         ll, pred, valid = {}, {}, np.empty(k, dtype=bool)
         for i in range(0, k, size):
             part = self._evaluate_block(theta[i:i + size], pointwise, predict)

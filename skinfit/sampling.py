@@ -27,11 +27,11 @@ Measured on the five shipped posteriors (5 seeds each, this 2-CPU machine; bench
 the largest integrated autocorrelation time fell from 23-69 steps (DE and snooker moves,
 the previous engine) to 3-10, and a converged electroadhesion fit from 2.7-3.9k steps
 (~6 s) to 400-700 steps (0.5-0.8 s); three independence updates a step then took it to
-150-250 steps (0.09-0.16 s of sampling, 6 seeds).  An independence sampler is only as good as its
-proposal's tails: a walker in a region where the posterior is much larger than the mixture
-rejects for many steps; DE moves, refits and the R-hat gate over walkers guard against it,
-and tests/test_moves.py checks that the move is exact on a known target from a mismatched
-proposal (with a negative control that omits the Hastings factor).
+150-250 steps (0.09-0.16 s of sampling, 6 seeds).  An independence sampler is only as good
+as its proposal's tails: a walker in a region where the posterior is much larger than the
+mixture rejects for many steps; DE moves, refits and the R-hat gate over walkers guard
+against it, and tests/test_moves.py checks that the move is exact on a known target from a
+mismatched proposal (with a negative control that omits the Hastings factor).
 
 Convergence (see NOTES: walkers are not independent chains): after discarding a burn-in of
 ``burn_factor`` integrated autocorrelation times, the kept chain must be at least
@@ -51,8 +51,8 @@ import numpy as np
 from .moves import DEMove, IndependenceMove, default_moves
 from .proposal import fit_mixture, select_mixture
 
-__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "adaptive_moves", "describe_moves", "importance_start",
-           "sampler_settings"]
+__all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "independence_move", "adaptive_moves",
+           "describe_moves", "importance_start", "sampler_settings"]
 
 #: First step at which the independence proposal is refitted to the chain; later refits at
 #: twice the previous step, for as long as the run has not converged.
@@ -184,10 +184,10 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     t0 = time.perf_counter()
     nwalkers, d = p0.shape
     seed = int(rng.integers(2**32 - 1))
-    indep = IndependenceMove(proposal, INDEPENDENCE_SUBSTEPS) if proposal is not None else None
+    indep = independence_move(proposal) if proposal is not None else None
     if moves is None:
         moves = default_moves() if indep is None else adaptive_moves(indep)
-    backend, spent, evaluated = emcee.backends.Backend(), 0.0, [0]
+    backend, spent, evaluated = emcee.backends.Backend(), 0.0, 0
     state = emcee.State(p0, random_state=np.random.RandomState(seed).get_state())
     if resume is not None and resume.iteration > 0:
         backend.reset(nwalkers, d)
@@ -199,13 +199,17 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         spent = resume.seconds
         saved = dict(resume.counts)
         # checkpoints written before the count was saved: one evaluation per walker and step
-        evaluated[0] = saved.pop(SAMPLER_EVALUATIONS, resume.iteration * nwalkers)
+        evaluated = saved.pop(SAMPLER_EVALUATIONS, resume.iteration * nwalkers)
         if hasattr(post, "counts"):
             post.counts.update(saved)
 
     def log_prob(z):  # the target, counting its evaluations (moves make 1 to k a walker and step)
-        evaluated[0] += len(z)
+        nonlocal evaluated
+        evaluated += len(z)
         return post(z)
+
+    def tally():  # the evaluation counters, for the checkpoint
+        return {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated}
 
     sampler_class = _Sampler if checkpoint is None else emcee.EnsembleSampler
     sampler = sampler_class(nwalkers, d, log_prob, vectorize=True, moves=moves, backend=backend)
@@ -217,8 +221,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     while next_adapt is not None and next_adapt < n:
         start, next_adapt = _apply_refit(indep, backend.get_chain(), next_adapt, start, seed, proposal.nu,
                                          history, max_steps)
-    # the evaluation counters as of the last completed step
-    counts = {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated[0]}
+    counts = tally()  # as of the last completed step
 
     def save():
         if checkpoint is not None:
@@ -236,7 +239,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
             target = min([c for c in checks if c >= n] + ([next_adapt] if next_adapt is not None else []))
             if target > n:
                 for state in sampler.sample(state, iterations=target - n):
-                    counts = {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated[0]}
+                    counts = tally()
                     if bar is not None:
                         bar.update(1)
                     if checkpoint is not None and checkpoint.due():
@@ -269,7 +272,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     return SamplerRun(chain=kept, log_prob=logp[burn::thin].T, tau=tau, ess_emcee=ess, rhat_max=rhat,
                       acceptance=np.asarray(sampler.acceptance_fraction), n_steps=n, burn=burn,
                       thin=thin, converged=not reasons, reasons=tuple(reasons),
-                      seconds=spent + time.perf_counter() - t0, evaluations=evaluated[0],
+                      seconds=spent + time.perf_counter() - t0, evaluations=evaluated,
                       adaptation=tuple(history))
 
 
@@ -287,6 +290,11 @@ def describe_moves():
     return (f"skinfit.moves.IndependenceMove (mixture of Student-t, refitted; {INDEPENDENCE_SUBSTEPS} updates "
             f"a step) {INDEPENDENCE_WEIGHT:g} + "
             f"skinfit.moves.DEMove {1 - INDEPENDENCE_WEIGHT:g}")
+
+
+def independence_move(proposal):
+    """The independence move :func:`run_emcee` samples with, from ``proposal``."""
+    return IndependenceMove(proposal, INDEPENDENCE_SUBSTEPS)
 
 
 def adaptive_moves(indep):
