@@ -295,9 +295,13 @@ def ultrasonic_interpolation(x):
 
 def _ultrasonic(post):
     """Period average of the distinct rows: mu_E at fixed interpolation speeds (they depend only
-    on the covariates) times one matrix (:func:`ultrasonic_interpolation`)."""
+    on the covariates) times one matrix (:func:`ultrasonic_interpolation`); mu_inf sampled as
+    log(mu_inf / (1 + q)) (the card's shear)."""
+    from skinfit.physics.ultrasonic import mu_inf_offset
+
     _expect(post, ("mu_inf", "mu_0", "k_V", "q", "V0", "sigma"), ["log", "identity", "log", "log", "log", "log"],
             {"friction_coefficient": "normal"})
+    assert [(j, f) for j, f in post._shear] == [(0, mu_inf_offset)]
     xu, cnt, stats = _distinct(post)
     ybar, ssw = stats["friction_coefficient"]
     inv, v2, matrix = ultrasonic_interpolation(xu)
@@ -309,6 +313,8 @@ def _ultrasonic(post):
     def fused(z):
         theta = np.exp(z)
         theta[:, 1] = z[:, 1]  # mu_0 in natural units
+        log1p_q = np.log1p(theta[:, 3])
+        theta[:, 0] *= 1.0 + theta[:, 3]
         mu_inf, mu_0, k_v, q, v0, sigma = theta.T[:, :, None]
         u = v0 * inv
         e = np.exp(-u)
@@ -320,7 +326,8 @@ def _ultrasonic(post):
         d = ybar - mu_e @ matrix_t
         ss = (ssw + (cnt * d * d).sum(axis=1)) / (sigma[:, 0] * sigma[:, 0])
         ok = (2.0 * mu_inf[:, 0] - mu_0[:, 0] > 0.0) & ((theta >= lo) & (theta <= hi)).all(axis=1)
-        return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 5] + z.sum(axis=1) - z[:, 1], -np.inf)
+        return np.where(ok, prior(theta) + const - 0.5 * ss - n * z[:, 5] + z.sum(axis=1) - z[:, 1] + log1p_q,
+                        -np.inf)
 
     return fused
 

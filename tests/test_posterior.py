@@ -39,14 +39,14 @@ def test_every_card_with_sampling_coordinates_is_covered():
 @pytest.mark.parametrize("model, transforms", [
     ("electroadhesion", {"phi": "log", "d_air": "shift_log", "beta0": "product"}),
     ("textured_surface", {"alpha": "identity", "beta_h": "product", "E_fingerpad": "log"}),
-    ("ultrasonic", {"mu_0": "identity", "q": "log"}),
+    ("ultrasonic", {"mu_0": "identity", "q": "log", "mu_inf": "log"}),
 ])
 def test_declared_coordinates_take_effect(model, transforms):
     post = _posterior(model)
     got = {s.name: s.transform for s in post.slots}
     assert {p: got[p] for p in transforms} == transforms
-    if model == "electroadhesion":
-        assert [post.slots[j].base for j, _ in post._shear] == ["phi"]
+    sheared = {"electroadhesion": ["phi"], "ultrasonic": ["mu_inf"]}.get(model, [])
+    assert [post.slots[j].base for j, _ in post._shear] == sheared
 
 
 def test_round_trip(post, rng):
