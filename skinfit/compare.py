@@ -38,9 +38,9 @@ def compare(fits, *, method="bridge", rng=None):
     fits = list(fits)
     if len(fits) < 2:
         raise InputError("compare", "need at least two fits to compare")
-    hashes = {f.idata.attrs["dataset_sha256"] for f in fits}
+    hashes = {f.attrs["dataset_sha256"] for f in fits}
     if len(hashes) > 1:
-        described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.idata.attrs['dataset_sha256'][:12]})" for f in fits)
+        described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.attrs['dataset_sha256'][:12]})" for f in fits)
         raise InputError("compare", f"fits were made on different data and cannot be compared: {described}")
     rows = []
     for f in fits:

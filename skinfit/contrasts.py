@@ -31,7 +31,7 @@ def draws(fit, name):
     if name not in slots:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"no sampled parameter {name!r} "
                          f"(sampled: {', '.join(slots)})", field="parameter")
-    return _slot_values(fit.idata["posterior"].to_dataset(), slots[name])
+    return _slot_values(fit.group("posterior"), slots[name])
 
 
 def contrast(a, b, prob=0.95):

@@ -93,7 +93,7 @@ def _done(path, item):
 
     try:
         saved = load_fit(path)
-        attrs = saved.idata.attrs
+        attrs = saved.attrs
         data = _select(load_dataset(item["dataset"]), item["rows"])
         return (int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
                 and attrs.get("model_sha256") == load_model(item["model"]).sha256

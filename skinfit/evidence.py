@@ -23,7 +23,7 @@ METHODS = ("bridge", "laplace", "nested")
 def posterior_draws(fit):
     """Posterior draws of every sampled slot, natural units, shape (n_draws, d), slot order."""
     post = fit.posterior
-    ds = fit.idata["posterior"].to_dataset()
+    ds = fit.group("posterior")
     cols = []
     for slot in post.slots:
         da = ds[slot.base]
@@ -39,11 +39,11 @@ def evidence(fit, method="bridge", *, rng=None, n_repeats=1, refresh=False, **op
 
     Returns a :class:`~skinfit.evidence_methods.LogEvidence` (``log_z``, ``se``, ...).
     ``n_repeats`` > 1 repeats the estimate with fresh random splits and reports the spread.
-    The result is stored in ``fit.idata.attrs["evidence"]`` (save the fit to keep it).
+    The result is stored in ``fit.attrs["evidence"]`` (save the fit to keep it).
     """
     if method not in METHODS:
         raise ValueError(f"unknown evidence method {method!r} (expected one of {', '.join(METHODS)})")
-    cache = json.loads(fit.idata.attrs.get("evidence", "{}"))
+    cache = json.loads(fit.attrs.get("evidence", "{}"))
     if method in cache and not refresh and cache[method].get("n_repeats", 1) >= n_repeats:
         return _from_dict(cache[method])
     rng = as_generator(rng if rng is not None else _seed_for(fit, method))
@@ -68,20 +68,21 @@ def evidence(fit, method="bridge", *, rng=None, n_repeats=1, refresh=False, **op
     record["n_repeats"] = n_repeats
     record["wall_s"] = time.perf_counter() - t0
     cache[method] = record
-    fit.idata.attrs["evidence"] = json.dumps(cache)
+    fit.attrs["evidence"] = json.dumps(cache)
     return result
 
 
 def _ess_of(fit):
     """Effective sample size of the stored draws (min over parameters, emcee estimate)."""
     sampler = fit.attr("sampler")
-    n_draws = fit.idata["posterior"].sizes["chain"] * fit.idata["posterior"].sizes["draw"]
+    sizes = fit.group("posterior").sizes
+    n_draws = sizes["chain"] * sizes["draw"]
     ess = min(sampler["ess_emcee"].values())
     return float(min(ess, n_draws))
 
 
 def _seed_for(fit, method):
-    seed = int(fit.idata.attrs.get("seed", -1))
+    seed = int(fit.attrs.get("seed", -1))
     return np.random.SeedSequence([max(seed, 0), METHODS.index(method), 7919]).generate_state(1)[0]
 
 

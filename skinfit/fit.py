@@ -1,9 +1,11 @@
 """``skinfit.fit``: MAP (nlopt) -> emcee from the Laplace ball -> diagnostics -> a Fit.
 
-A :class:`Fit` wraps one ArviZ DataTree (groups posterior, sample_stats, log_likelihood,
-posterior_predictive, observed_data, constant_data, prior) whose root attributes record where
+A :class:`Fit` wraps one ArviZ DataTree (groups posterior, prior, sample_stats, log_likelihood,
+posterior_predictive, observed_data, constant_data, derived) whose root attributes record where
 every number came from: model card, prior file and dataset (with hashes and full texts),
-skinfit and dependency versions, seed, MAP, optimiser status, timings and convergence.
+skinfit and dependency versions, seed, MAP, optimiser status, timings and convergence.  The
+pointwise ``log_likelihood`` and ``posterior_predictive`` groups, (draws x rows) each and most
+of the tree's cost, are computed on first use (:attr:`Fit.idata`, :meth:`Fit.save`).
 """
 
 import json
@@ -11,6 +13,7 @@ import os
 import tempfile
 import time
 import warnings
+from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
@@ -18,6 +21,7 @@ from pathlib import Path
 import arviz as az
 import numpy as np
 import pandas as pd
+import xarray as xr
 
 from .data import Dataset, load_dataset
 from .errors import ConvergenceWarning, InputError
@@ -30,6 +34,12 @@ from .guardrails import check_run
 from .sampling import CHECK_EVERY, describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
+
+#: The groups of a fit's tree in ArviZ's order; the two of :data:`DEFERRED` are computed on
+#: first use.
+GROUPS = ("posterior", "prior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data",
+          "constant_data", "derived")
+DEFERRED = ("log_likelihood", "posterior_predictive")
 
 _VERSIONED = ("skinfit", "numpy", "scipy", "emcee", "nlopt", "arviz", "arviz-base", "arviz-stats",
               "xarray", "pandas")
@@ -59,7 +69,11 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     priors : PriorSet or str, optional
         Default: ``priors/<model id>.toml``.
     rng : int, None or numpy.random.Generator
-        The one source of randomness (SPEC 7); the same seed gives identical samples.
+        The one source of randomness (SPEC 7); the same seed gives identical samples.  The fit
+        draws from it in a fixed order (MAP search, importance start, walkers, sampling, prior
+        draws) and last the seed of a child generator kept for the posterior-predictive draws:
+        the same seed gives identical ``log_likelihood`` and ``posterior_predictive`` groups
+        whenever they are computed, and a Generator passed in is advanced by the fit alone.
     split : mapping parameter -> column(s), optional
         Parameters fitted once per level of a grouping column (default: the card's ``[split]``).
     noise : str or mapping observable -> str, optional
@@ -83,11 +97,17 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     Returns
     -------
     Fit
-        Its ``attr("timings")`` [s]: ``map_s`` the MAP search; ``start_s`` from the first random
-        draw to the first step (the MAP search and the importance start); ``sampling_s``;
-        ``tree_s`` the result tree; ``total_s`` the whole call; ``resumed``.  A resumed fit
-        (``resumed`` true) had its MAP and start in the run that wrote the checkpoint: its
-        ``map_s`` is that run's, ``start_s`` is 0 and ``sampling_s`` sums every run's sampling.
+        Its tree holds every group but ``log_likelihood`` and ``posterior_predictive`` (a
+        value per posterior draw and data row each), which are computed on first use of
+        :attr:`Fit.idata` (or by :meth:`Fit.save`, ``skinfit fit``, reports and
+        :func:`~skinfit.compare`); until then :attr:`Fit.pending` is true.  Its
+        ``attr("timings")`` [s]: ``map_s`` the MAP search;
+        ``start_s`` from the first random draw to the first step (the MAP search and the
+        importance start); ``sampling_s``; ``tree_s`` the result tree without the deferred
+        groups; ``total_s`` the whole call; ``resumed``; and, once they are computed,
+        ``pointwise_s`` the deferred groups.  A resumed fit (``resumed`` true) had its MAP and
+        start in the run that wrote the checkpoint: its ``map_s`` is that run's, ``start_s``
+        is 0 and ``sampling_s`` sums every run's sampling.
     """
     t_start = time.perf_counter()
     model = model if isinstance(model, Model) else load_model(model)
@@ -128,7 +148,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
             raise RuntimeError(msg)
         warnings.warn(msg, ConvergenceWarning, stacklevel=2)
     t_tree = time.perf_counter()
-    idata = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
+    idata, deferred = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
     now = time.perf_counter()
     idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds,
                                          "start_s": t_start_s if saved is None else 0.0,
@@ -137,7 +157,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     for w in json.loads(idata.attrs["warnings"]):  # non-convergence was warned above
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
-    return Fit(idata, posterior=post)
+    return Fit(idata, posterior=post, deferred=deferred)
 
 
 def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
@@ -166,11 +186,13 @@ def default_walkers(post):
 
 
 def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=()):
+    """The result tree without the groups of :data:`DEFERRED`, and what computes them later."""
     nw, nd, d = run.chain.shape
     theta = post.to_theta(run.chain.reshape(-1, d))
     t_prior = post.sample_prior(n_prior_draws, rng)
-    ll, simulated = post.replicate(theta, rng)  # after the prior draws: the order of the random stream
-    lp_nat = post.log_prior(theta) + sum(v.sum(axis=1) for v in ll.values())
+    # after the prior draws, the last draw of a fit: the predictive draws' own generator
+    deferred = _Deferred(theta, nw, nd, rng.integers(2**63, size=4))
+    lp_nat = post.log_prior(theta) + post.log_likelihood(theta)
     posterior, prior_group, dims, coords = {}, {}, {}, {"obs_id": np.arange(post.n)}
     for pname in list(post.model.parameter_names) + list(post.noise_names):
         cols = [j for j, s in enumerate(post.slots) if s.base == pname]
@@ -183,9 +205,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
         else:
             posterior[pname] = theta[:, cols[0]].reshape(nw, nd)
             prior_group[pname] = t_prior[:, cols[0]].reshape(1, n_prior_draws)
-    ppc = {o: v.reshape(nw, nd, post.n) for o, v in simulated.items()}
     dims.update({o: ["obs_id"] for o in post.observables})
-    loglik = {o: v.reshape(nw, nd, post.n) for o, v in ll.items()}
     constant = {c: np.asarray(v) for c, v in post.x.items()}
     for c in post.dataset.frame.columns:
         if c not in constant and c not in post.observables:
@@ -223,11 +243,29 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
-    return az.from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
-                         "log_likelihood": loglik, "posterior_predictive": ppc,
+    tree = az.from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
                          "observed_data": observed, "constant_data": constant,
                          **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
                         dims=dims, coords=coords, attrs={"/": attrs})
+    return tree, deferred
+
+
+@dataclass(frozen=True)
+class _Deferred:
+    """What completes a fit's tree: its draws ``theta`` (nwalkers * ndraws, d), natural
+    units, and the seed of the predictive draws' generator (drawn by :func:`_build_tree`)."""
+    theta: np.ndarray
+    nwalkers: int
+    ndraws: int
+    seed: np.ndarray
+
+    def groups(self, post):
+        """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id)."""
+        ll, simulated = post.replicate(self.theta, np.random.default_rng(self.seed))
+        shape = (self.nwalkers, self.ndraws, post.n)
+        return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
+                             "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
+                            dims={o: ["obs_id"] for o in post.observables}, coords={"obs_id": np.arange(post.n)})
 
 
 def _derived_group(post, theta, nw, nd, dims, coords, attrs):
@@ -267,13 +305,24 @@ def _derived_summary(tree):
     return table
 
 
-def _wall_time_text(t):
+def _wall_time_text(t, pending=False):
     """The timings of a fit (see :func:`fit`) in one line."""
     if t.get("resumed"):
-        return (f"wall time: resumed from a checkpoint (MAP {t['map_s']:.2f} s in the first run), sampling "
+        text = (f"wall time: resumed from a checkpoint (MAP {t['map_s']:.2f} s in the first run), sampling "
                 f"{t['sampling_s']:.2f} s over all runs, result tree {t['tree_s']:.2f} s, this call {t['total_s']:.2f} s")
-    return (f"wall time: MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, "
-            f"sampling {t['sampling_s']:.2f} s, result tree {t['tree_s']:.2f} s, total {t['total_s']:.2f} s")
+    else:
+        text = (f"wall time: MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, "
+                f"sampling {t['sampling_s']:.2f} s, result tree {t['tree_s']:.2f} s, total {t['total_s']:.2f} s")
+    deferred = _pointwise_text(t, pending)
+    return f"{text}; {deferred}" if deferred else text
+
+
+def _pointwise_text(t, pending):
+    """When and in how long the deferred groups were computed ('' for a fit saved before they
+    were deferred, whose ``tree_s`` includes them)."""
+    if "pointwise_s" in t:
+        return f"pointwise log-likelihood and predictive draws {t['pointwise_s']:.2f} s (on first use)"
+    return "pointwise log-likelihood and predictive draws deferred until first use" if pending else ""
 
 
 @lru_cache(maxsize=1)
@@ -291,24 +340,66 @@ class Fit:
     """The result of :func:`fit`: an ArviZ DataTree plus convenience views.
 
     ``fit.idata`` is the DataTree; ``fit.summary()`` a table; ``fit.save(path)`` writes NetCDF.
+    A fresh fit defers the groups of :data:`DEFERRED` (:attr:`pending`): :attr:`idata`,
+    :meth:`complete` and :meth:`save` compute them; :attr:`attrs`, :meth:`group` of any other
+    group, :meth:`summary`, :meth:`report_text` and the provenance properties do not.
     """
 
-    def __init__(self, idata, posterior=None):
-        self.idata = idata
+    def __init__(self, idata, posterior=None, *, deferred=None):
+        self._tree = idata
         self._posterior = posterior
+        self._deferred = deferred
+
+    @property
+    def pending(self):
+        """True until the groups of :data:`DEFERRED` are in the tree."""
+        return self._deferred is not None
+
+    @property
+    def idata(self):
+        """The complete ArviZ DataTree (computes the deferred groups on first access)."""
+        return self.complete()._tree
+
+    def complete(self):
+        """Compute the deferred groups, if pending, and put them in the tree in ArviZ's order
+        (:data:`GROUPS`), with their time as ``pointwise_s`` in ``attr("timings")``; returns
+        the fit.  The root attributes are kept (e.g. an evidence already cached)."""
+        if self._deferred is None:
+            return self
+        t0 = time.perf_counter()
+        tree, extra = self._tree, self._deferred.groups(self.posterior)
+        nodes = {n: tree[n] for n in tree.children} | {n: extra[n] for n in extra.children}
+        tree = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
+                                     | {n: nodes[n].to_dataset(inherit=False) for n in sorted(nodes, key=GROUPS.index)})
+        timings = json.loads(tree.attrs["timings"])
+        tree.attrs["timings"] = json.dumps(timings | {"pointwise_s": time.perf_counter() - t0})
+        self._tree, self._deferred = tree, None
+        return self
+
+    @property
+    def attrs(self):
+        """The tree's root attributes (provenance, timings, evidence): a mutable dict; never
+        computes the deferred groups."""
+        return self._tree.attrs
+
+    def group(self, name):
+        """One group of the tree as an ``xarray.Dataset``; only the groups of
+        :data:`DEFERRED` compute them first."""
+        tree = self.idata if name in DEFERRED else self._tree
+        return tree[name].to_dataset()
 
     # ---- provenance ---------------------------------------------------------------------
     def attr(self, key):
-        value = self.idata.attrs[key]
+        value = self.attrs[key]
         return json.loads(value) if isinstance(value, str) and value[:1] in "{[" else value
 
     @property
     def model_id(self):
-        return self.idata.attrs["model_id"]
+        return self.attrs["model_id"]
 
     @property
     def dataset_id(self):
-        return self.idata.attrs["dataset_id"]
+        return self.attrs["dataset_id"]
 
     @property
     def map(self):
@@ -318,7 +409,7 @@ class Fit:
     def warnings(self):
         """Guard-rail problems found when the fit ran (:mod:`skinfit.guardrails`): a list of dicts
         ``check, status (FAIL | WARN), parameter, message``; empty for a clean fit."""
-        return json.loads(self.idata.attrs.get("warnings", "[]"))
+        return json.loads(self.attrs.get("warnings", "[]"))
 
     @property
     def converged(self):
@@ -328,7 +419,7 @@ class Fit:
     def posterior(self):
         """The :class:`~skinfit.posterior.Posterior` behind the fit, rebuilt from the saved tree."""
         if self._posterior is None:
-            self._posterior = rebuild_posterior(self.idata)
+            self._posterior = rebuild_posterior(self._tree)
         return self._posterior
 
     # ---- tables -------------------------------------------------------------------------
@@ -342,14 +433,13 @@ class Fit:
         """
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            table = az.summary(self.idata, ci_kind="hdi", ci_prob=0.94, round_to="none",
-                               var_names=[v for v in self.idata["posterior"].data_vars])
+            table = az.summary(self._tree, ci_kind="hdi", ci_prob=0.94, round_to="none",
+                               var_names=[v for v in self._tree["posterior"].data_vars])
         table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
         table.index = [_slot_name(i) for i in table.index]
         sampler = self.attr("sampler")
-        post_ds = self.idata["posterior"].to_dataset()
-        prior_ds = self.idata["prior"].to_dataset() if "prior" in self.idata.children else None
-        priors = _priors_from_attrs(self.idata)
+        post_ds = self.group("posterior")
+        priors = _priors_from_attrs(self.attrs)
         rows = {s["name"]: s for s in self.attr("slots")}
         contraction, notes = [], []
         for name in table.index:
@@ -366,12 +456,11 @@ class Fit:
             notes.append("; ".join(["mostly prior: the data barely determine it"] * (c < 0.5)
                                    + [f"ON A BOUND: {w['message']}" for w in self.warnings
                                       if w["check"] == "bound" and w["parameter"] == name]))
-        del prior_ds
         table["map"] = [self.map[n] for n in table.index]
         table["tau"] = [sampler["tau"][n] for n in table.index]
         table["contraction"] = contraction
         table["note"] = notes
-        table = pd.concat([table, _derived_summary(self.idata)])
+        table = pd.concat([table, _derived_summary(self._tree)])
         return table[["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
                       "contraction", "note"]]
 
@@ -379,14 +468,14 @@ class Fit:
         """Sampler, optimiser and support diagnostics as one dict."""
         return {"sampler": self.attr("sampler"), "optimizer": self.attr("optimizer"),
                 "timings": self.attr("timings"), "support_counts": self.attr("support_counts"),
-                "support_condition": self.idata.attrs.get("support_condition", "")}
+                "support_condition": self.attrs.get("support_condition", "")}
 
     def report_text(self):
         """The text printed by ``skinfit fit``: summary table and diagnostics."""
         s = self.attr("sampler")
         t = self.attr("timings")
         c = self.attr("support_counts")
-        lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.idata.attrs['dataset_sha256'][:12]})",
+        lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.attrs['dataset_sha256'][:12]})",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
@@ -397,10 +486,10 @@ class Fit:
                  + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
                  + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
                  f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
-                 _wall_time_text(t),
+                 _wall_time_text(t, self.pending),
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
-                 + (f" ({self.idata.attrs.get('support_condition')})" if c["outside_support"] else ""),
+                 + (f" ({self.attrs.get('support_condition')})" if c["outside_support"] else ""),
                  ""]
         with pd.option_context("display.width", 200, "display.max_columns", 20,
                                "display.float_format", "{:.4g}".format):
@@ -408,7 +497,8 @@ class Fit:
         return "\n".join(lines)
 
     def save(self, path):
-        """Write the fit as NetCDF, atomically (temporary file + rename)."""
+        """Write the fit as NetCDF, atomically (temporary file + rename), with every group (a
+        pending fit is completed first)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".nc.tmp")
@@ -455,12 +545,13 @@ def _slot_values(post_ds, slot):
     return da.values.ravel()
 
 
-def _priors_from_attrs(tree):
+def _priors_from_attrs(attrs):
+    """The prior of each parameter, from the prior file's text saved in a fit's root ``attrs``."""
     import tomllib
 
     from .priors import parse_prior
 
-    doc = tomllib.loads(tree.attrs["priors_text"])
+    doc = tomllib.loads(attrs["priors_text"])
     return {k: parse_prior(k, v, "saved priors") for k, v in doc.items()
             if k not in ("schema_version", "model", "id")}
 
@@ -477,7 +568,7 @@ def rebuild_posterior(tree):
     model = _parse_model_text(attrs["model_card"], f"model card saved in fit ({attrs['model_id']})",
                               attrs["model_sha256"])
     priors = PriorSet(id=attrs["priors_id"], model=attrs["model_id"],
-                      priors=MappingProxyType(_priors_from_attrs(tree)), path="saved priors",
+                      priors=MappingProxyType(_priors_from_attrs(attrs)), path="saved priors",
                       sha256=attrs["priors_sha256"], text=attrs["priors_text"])
     setup = json.loads(attrs["setup"])
     units = json.loads(attrs["units"])

@@ -86,11 +86,7 @@ def _as_fit(obj):
 
 
 def _card(fit):
-    return tomllib.loads(fit.idata.attrs["model_card"])
-
-
-def _group(fit, name):
-    return fit.idata[name].to_dataset()
+    return tomllib.loads(fit.attrs["model_card"])
 
 
 def _data_units(fit):
@@ -135,7 +131,7 @@ def _slots(fit):
     """The sampled scalars: name, base, level, unit, and whether plotted on a log axis."""
     from .fit import _priors_from_attrs
 
-    priors = _priors_from_attrs(fit.idata)
+    priors = _priors_from_attrs(fit.attrs)
     units = parameter_units(fit)
     out = []
     for s in fit.attr("slots"):
@@ -193,8 +189,8 @@ def plot_spec(fit):
     fit = _as_fit(fit)
     card = _card(fit)
     table = dict(card.get("plot", {}))
-    cd = _group(fit, "constant_data")
-    observables = list(_group(fit, "observed_data").data_vars)
+    cd = fit.group("constant_data")
+    observables = list(fit.group("observed_data").data_vars)
     covariates = [c["name"] for c in card.get("covariates", [])]
     x = table.get("x") or next((c for c in covariates if c in cd), None)
     if x is None:
@@ -243,7 +239,7 @@ def _n_combinations(cd, columns):
 
 def _levels(fit, column, units):
     """Codes (n,) and labels of a panel/colour column, in data units, NaN as 'none'."""
-    values = _group(fit, "constant_data")[column].values
+    values = fit.group("constant_data")[column].values
     unit = units.get(column)
     numeric = np.issubdtype(values.dtype, np.number)
     if not numeric:
@@ -270,7 +266,7 @@ def _levels(fit, column, units):
 
 def _keys(fit, columns, units):
     """Combined level code per row and the label of each combination present."""
-    n = _group(fit, "observed_data").sizes["obs_id"]
+    n = fit.group("observed_data").sizes["obs_id"]
     if not columns:
         return np.zeros(n, dtype=int), [""]
     parts = [_levels(fit, c, units) for c in columns]
@@ -282,7 +278,7 @@ def _keys(fit, columns, units):
 
 
 def _ppc_draws(fit, observable, max_draws=20000):
-    arr = _group(fit, "posterior_predictive")[observable].transpose("chain", "draw", "obs_id").values
+    arr = fit.group("posterior_predictive")[observable].transpose("chain", "draw", "obs_id").values
     arr = arr.reshape(-1, arr.shape[-1])
     if len(arr) > max_draws:
         arr = arr[np.linspace(0, len(arr) - 1, max_draws).astype(int)]
@@ -300,8 +296,8 @@ def ppc_bands(fit):
     fit = _as_fit(fit)
     spec = plot_spec(fit)
     units = _data_units(fit)
-    cd = _group(fit, "constant_data")
-    od = _group(fit, "observed_data")
+    cd = fit.group("constant_data")
+    od = fit.group("observed_data")
     x = np.asarray(cd[spec["x"]].values, dtype=float) / _factor(units.get(spec["x"]))
     panel, panel_labels = _keys(fit, spec["panels"], units)
     colour, colour_labels = _keys(fit, spec["colours"], units)
@@ -321,7 +317,7 @@ def ppc_bands(fit):
 
 def _theta_draws(fit, post, n):
     """(n, d) natural parameter vectors evenly spread over the posterior draws."""
-    ds = _group(fit, "posterior")
+    ds = fit.group("posterior")
     cols = [_values(ds, {"base": s.base, "level": s.level}).ravel() for s in post.slots]
     theta = np.column_stack(cols)
     if len(theta) > n:
@@ -363,7 +359,7 @@ def _median_curves(fit, spec, keys):
             pred, ok = post.model.forward(p_group, cov, post.constants)
         else:
             order = idx[np.argsort(post.x[x_name][idx], kind="stable")] if x_name in post.x else idx
-            xs = np.asarray(_group(fit, "constant_data")[x_name].values, dtype=float)[order]
+            xs = np.asarray(fit.group("constant_data")[x_name].values, dtype=float)[order]
             pred, ok = post.model.forward(params, post.x, post.constants)
             pred = {o: np.broadcast_to(v, (len(theta), post.n))[:, order] for o, v in pred.items()}
             ok = np.broadcast_to(ok, (len(theta), post.n))[:, order] if np.ndim(ok) == 2 else ok
@@ -401,7 +397,7 @@ def _reference(spec, fit, idx, xs_si):
     """Reference curve in SI on ``xs_si`` for the rows ``idx``, or None."""
     if spec["reference"] != "ball_bearing":
         return None
-    cd = _group(fit, "constant_data")
+    cd = fit.group("constant_data")
     a = np.asarray(cd["amplitude"].values, dtype=float)[idx]
     lam = np.asarray(cd["wavelength"].values, dtype=float)[idx]
     if not (np.all(a == a[0]) and np.all(lam == lam[0])):
@@ -494,7 +490,7 @@ def plot_ppc(fit, path=None):
                 ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
             if r == 0:  # one reference curve per panel, on a fine grid over the panel's x range
                 idx = np.flatnonzero(keys // len(colour_labels) == p)
-                x_si = np.asarray(_group(fit, "constant_data")[spec["x"]].values, dtype=float)[idx]
+                x_si = np.asarray(fit.group("constant_data")[spec["x"]].values, dtype=float)[idx]
                 grid = np.linspace(x_si.min(), x_si.max(), _N_GRID) if idx.size else x_si
                 ref = _reference(spec, fit, idx, grid) if idx.size else None
                 if ref is not None:
@@ -536,7 +532,7 @@ def plot_ppc(fit, path=None):
 def _draw_pair_row(fit, axes, pair, spec, units, panel, colour, curves, n_colours):
     """One observable against the other: data, joint predictive draws, median curve."""
     xo, yo = pair
-    od = _group(fit, "observed_data")
+    od = fit.group("observed_data")
     fx, fy = _factor(units.get(xo)), _factor(units.get(yo))
     px, py = _ppc_draws(fit, xo, 20), _ppc_draws(fit, yo, 20)
     for p, ax in enumerate(axes):
@@ -579,7 +575,7 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
     elif len(slots) > _MAX_PAIR:
         slots = [s for s in slots if s["level"] is None][:_MAX_PAIR]
-    ds = _group(fit, "posterior")
+    ds = fit.group("posterior")
     values = np.column_stack([_values(ds, s).ravel() for s in slots])
     if len(values) > max_draws:
         values = values[np.linspace(0, len(values) - 1, max_draws).astype(int)]
@@ -660,7 +656,7 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
     slots = _slots(fit)
     if var_names is not None:
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
-    ds = _group(fit, "posterior")
+    ds = fit.group("posterior")
     sampler = fit.attr("sampler")
     fig = _new_figure(10, 1.35 * len(slots) + 0.9)
     axes = fig.subplots(len(slots), 2, squeeze=False, width_ratios=[3, 1])
@@ -705,7 +701,7 @@ def plot_rank(fit, path=None, *, var_names=None):
     import matplotlib.pyplot as plt
 
     try:
-        pc = azp.plot_rank(fit.idata, var_names=var_names, backend="matplotlib")
+        pc = azp.plot_rank(fit.group("posterior"), var_names=var_names, backend="matplotlib")
         fig = pc.viz["figure"].item()
     except (ValueError, KeyError, TypeError):  # e.g. more panels than plot.max_subplots
         return plot_trace(fit, path, var_names=var_names)
@@ -726,7 +722,7 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
     if var_names is not None:
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
     summary = fit.summary()
-    ds = _group(fit, "posterior")
+    ds = fit.group("posterior")
     ncols = min(ncols, len(slots))
     nrows = math.ceil(len(slots) / ncols)
     fig = _new_figure(3.0 * ncols, 2.3 * nrows + 0.7)
@@ -804,8 +800,9 @@ def _forest_rows(items, parameter):
             item = _as_fit(item)
             unit = unit or parameter_units(item).get(parameter)
             table = item.summary()
-            dims = [d for d in item.idata["posterior"][parameter].dims if d not in ("chain", "draw")] \
-                if parameter in item.idata["posterior"].data_vars else []
+            post = item.group("posterior")
+            dims = ([d for d in post[parameter].dims if d not in ("chain", "draw")]
+                    if parameter in post.data_vars else [])
         else:
             table, dims = item, []
         for name in table.index:

@@ -134,8 +134,8 @@ class PopulationResult:
 def _subject_draws(fit, parameters, n_draws, rng):
     """(z draws (n, p), log prior density of z (n,), natural draws, log flags, priors) of one fit."""
     slots = {s["name"]: s for s in fit.attr("slots")}
-    priors = _priors_from_attrs(fit.idata)
-    post = fit.idata["posterior"].to_dataset()
+    priors = _priors_from_attrs(fit.attrs)
+    post = fit.group("posterior")
     cols, logp, logs, used = [], 0.0, [], []
     for name in parameters:
         if name not in slots:

@@ -20,6 +20,7 @@ import pandas as pd
 
 from . import plots
 from .errors import InputError
+from .fit import _pointwise_text
 from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report"]
@@ -129,7 +130,7 @@ def fit_diagnostics(fit, summary=None):
     add("evaluations", int(c["evaluations"]), "", "info")
     add("evaluations outside the prior bounds", int(c["outside_prior"]), "rejected proposals", "info")
     share = c["outside_support"] / n_eval
-    condition = fit.idata.attrs.get("support_condition", "")
+    condition = fit.attrs.get("support_condition", "")
     add("evaluations outside the physical support", int(c["outside_support"]),
         f"< {MAX_OUTSIDE_SUPPORT:.0%} of evaluations" + (f" ({condition})" if condition else ""),
         "ok" if share < MAX_OUTSIDE_SUPPORT else "WARN",
@@ -145,11 +146,13 @@ def fit_diagnostics(fit, summary=None):
             add(f"guard rail: {w['check']}" + (f" ({w['parameter']})" if w["parameter"] else ""),
                 "tripped", "see skinfit.guardrails", w["status"], w["message"])
     starts = fit.attr("optimizer").get("starts", [])
-    add("MAP log density", float(fit.idata.attrs.get("map_log_density", float("nan"))),
+    add("MAP log density", float(fit.attrs.get("map_log_density", float("nan"))),
         f"best of {len(starts)} optimiser runs, final status {starts[-1]['status'] if starts else 'n/a'}", "info")
-    add("wall time [s]", float(t["total_s"]), f"MAP {t['map_s']:.1f} s, sampling {t['sampling_s']:.1f} s"
+    deferred = _pointwise_text(t, fit.pending)
+    add("wall time [s]", float(t["total_s"]), f"MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, "
+        f"result tree {t['tree_s']:.2f} s"
         + (" (resumed from a checkpoint: this call's wall time; MAP in the first run, sampling over all runs)"
-           if t.get("resumed") else ""), "info")
+           if t.get("resumed") else "") + (f"; {deferred}" if deferred else ""), "info")
     table = pd.DataFrame(rows, columns=["check", "value", "criterion", "status"]).set_index("check")
     return table, issues
 
@@ -158,11 +161,11 @@ def fit_diagnostics(fit, summary=None):
 def _provenance(fit):
     import tomllib
 
-    attrs = fit.idata.attrs
+    attrs = fit.attrs
     card = tomllib.loads(attrs["model_card"])
     versions = json.loads(attrs.get("versions", "{}"))
     dprov = json.loads(attrs.get("dataset_provenance", "{}"))
-    created = fit.idata["posterior"].attrs.get("created_at", "")
+    created = fit.group("posterior").attrs.get("created_at", "")
     return {"model_id": attrs["model_id"], "model_sha": attrs["model_sha256"], "model_title": card.get("title", ""),
             "model_source": card.get("source", ""), "priors_id": attrs["priors_id"],
             "priors_sha": attrs["priors_sha256"], "dataset_id": attrs["dataset_id"],
@@ -265,6 +268,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
         raise InputError("skinfit report", "no fits given")
     issues_all, sections = [], []
     for key, fit in items:
+        fit.complete()  # its predictive checks need the deferred groups; the diagnostics then give their time
         summary = fit.summary()
         diag, issues = fit_diagnostics(fit, summary)
         summary.to_csv(out / f"{key}_summary.csv")
@@ -342,7 +346,7 @@ def _base(slot_name):
 
 def _split_parameters(fit):
     """Split parameter -> the name of its grouping dimension."""
-    post = fit.idata["posterior"]
+    post = fit.group("posterior")
     return {v: ", ".join(d for d in post[v].dims if d not in ("chain", "draw")) for v in post.data_vars
             if set(post[v].dims) - {"chain", "draw"}}
 
@@ -357,7 +361,7 @@ def _across_fits(items, figdir, population, issues):
         if len(group) < 2:
             continue
         figures = []
-        for pname in group[0][1].idata["posterior"].data_vars:
+        for pname in group[0][1].group("posterior").data_vars:
             path = figdir / f"across_{re.sub(r'[^A-Za-z0-9_.-]+', '_', model_id)}_{pname}.png"
             pop = _population_for(population, model_id, pname)
             fits = {k: f for k, f in group}
@@ -427,7 +431,7 @@ def _comparisons(fits):
         return None
     groups = {}
     for key, f in fits:
-        groups.setdefault(f.idata.attrs["dataset_sha256"], []).append((key, f))
+        groups.setdefault(f.attrs["dataset_sha256"], []).append((key, f))
     tables = {}
     for group in groups.values():
         if len({f.model_id for _, f in group}) < 2:

@@ -101,7 +101,7 @@ def _slot_draws(fit, names):
     """Posterior draws (n, d) in the order of the sampled slots ``names``."""
     from .fit import _slot_values
 
-    ds = fit.idata["posterior"].to_dataset()
+    ds = fit.group("posterior")
     slots = {s["name"]: s for s in fit.attr("slots")}
     return np.column_stack([_slot_values(ds, slots[n]) for n in names])
 

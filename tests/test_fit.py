@@ -1,5 +1,6 @@
 """End to end on electroadhesion: recovery, reproducibility, MAP, likelihoods, results file."""
 
+import json
 import tomllib
 import warnings
 from pathlib import Path
@@ -10,8 +11,10 @@ import pytest
 from scipy import optimize, stats
 
 import skinfit
+from pointwise import check_pointwise_groups
 from skinfit.optimize import find_map
 from skinfit.posterior import Posterior
+from skinfit.report import fit_diagnostics
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 CARD = tomllib.loads((ROOT / "datasets/electroadhesion_synthetic/dataset.toml").read_text())
@@ -53,8 +56,8 @@ def test_summary_columns_and_diagnostics(ea_fit):
 
 def test_result_tree_groups_and_provenance(ea_fit):
     tree = ea_fit.idata
-    assert {"posterior", "sample_stats", "log_likelihood", "posterior_predictive", "observed_data",
-            "constant_data", "prior"} <= set(tree.children)
+    assert list(tree.children) == ["posterior", "prior", "sample_stats", "log_likelihood", "posterior_predictive",
+                                   "observed_data", "constant_data"]  # ArviZ's order, as az.from_dict gives it
     ds = skinfit.load_dataset("electroadhesion_synthetic")
     assert tree.attrs["dataset_sha256"] == ds.sha256
     assert tree.attrs["model_sha256"] == skinfit.load_model("electroadhesion").sha256
@@ -77,13 +80,60 @@ def test_save_load_identical(ea_fit, tmp_path):
     assert back.posterior.log_density(theta) == pytest.approx(ea_fit.posterior.log_density(theta), rel=1e-12)
 
 
-def test_same_seed_identical_samples():
-    a, b = _short_fit(rng=7), _short_fit(rng=7)
-    np.testing.assert_array_equal(a.idata["posterior"]["E_star"].values, b.idata["posterior"]["E_star"].values)
-    np.testing.assert_array_equal(a.idata["posterior_predictive"]["tangential_force"].values,
-                                  b.idata["posterior_predictive"]["tangential_force"].values)
+def test_same_seed_identical_samples_whenever_the_pointwise_groups_are_computed():
+    """One fit's pointwise groups computed at once, the other's after another fit, its groups
+    and unrelated random draws: bit for bit the same; a Generator passed in is advanced by the
+    fit alone (as a fit from the same seed advances its own), not by the pointwise groups."""
+    generator = np.random.default_rng(7)
+    a = _short_fit(rng=generator)
+    after_fit = generator.bit_generator.state
+    a.idata
+    assert not a.pending and generator.bit_generator.state == after_fit
+    b_generator = np.random.default_rng(7)
+    b = _short_fit(rng=b_generator)
+    assert b.pending and b_generator.bit_generator.state == after_fit
     c = _short_fit(rng=8)
-    assert not np.array_equal(a.idata["posterior"]["E_star"].values, c.idata["posterior"]["E_star"].values)
+    c.idata
+    np.random.default_rng(0).standard_normal(1000), np.random.standard_normal(1000)
+    for group, var in [("posterior", "E_star"), ("sample_stats", "lp"), ("log_likelihood", "tangential_force"),
+                       ("posterior_predictive", "tangential_force")]:
+        np.testing.assert_array_equal(a.idata[group][var].values, b.idata[group][var].values)
+    for group, var in [("posterior", "E_star"), ("posterior_predictive", "tangential_force")]:
+        assert not np.array_equal(a.idata[group][var].values, c.idata[group][var].values)
+
+
+def test_pointwise_groups_agree_with_the_posterior(ea_fit):
+    check_pointwise_groups(ea_fit)
+
+
+def test_pointwise_groups_wait_for_first_use_and_are_saved(tmp_path):
+    """A fresh fit's summaries, provenance, diagnostics and evidence leave the pointwise groups
+    pending; saving computes them; the evidence cached before is kept through both."""
+    fit = _short_fit(rng=5)
+    assert fit.pending and "pointwise_s" not in fit.attr("timings")
+    fit.summary(), fit.diagnostics(), fit.attr("sampler"), fit.map, fit.warnings, fit.converged, repr(fit)
+    assert fit.model_id == "electroadhesion" and fit.dataset_id == "electroadhesion_synthetic"
+    assert fit.attrs["seed"] == 5 and fit.group("posterior").sizes["chain"] == fit.attr("sampler")["nwalkers"]
+    assert fit.report_text().count("pointwise log-likelihood and predictive draws deferred until first use") == 1
+    diagnostics, _ = fit_diagnostics(fit)
+    assert diagnostics.loc["wall time [s]", "criterion"].endswith("deferred until first use")
+    laplace = skinfit.evidence(fit, method="laplace")
+    assert fit.pending and set(fit.group("posterior").data_vars) == set(TRUTH)
+
+    path = fit.save(tmp_path / "fit.nc")
+    assert not fit.pending
+    timings = fit.attr("timings")
+    assert timings["pointwise_s"] > 0 and timings["tree_s"] > 0
+    assert f"pointwise log-likelihood and predictive draws {timings['pointwise_s']:.2f} s (on first use)" \
+        in fit.report_text()
+    back = skinfit.load_fit(path)
+    assert not back.pending and back.attr("timings") == timings
+    assert list(back.idata.children) == list(fit.idata.children)
+    for group in ("log_likelihood", "posterior_predictive"):
+        np.testing.assert_array_equal(back.group(group)["tangential_force"].values,
+                                      fit.group(group)["tangential_force"].values)
+    for f in (fit, back):
+        assert json.loads(f.attrs["evidence"])["laplace"]["log_z"] == laplace.log_z
 
 
 def test_different_seed_consistent_posterior(ea_fit):

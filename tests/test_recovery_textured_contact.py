@@ -12,6 +12,7 @@ import pytest
 from scipy import stats
 
 import skinfit
+from pointwise import check_pointwise_groups
 from recovery import check_coverage as _check_coverage
 from recovery import coverage as _coverage
 
@@ -184,6 +185,10 @@ def test_derived_group_values_summary_and_save(ca_fit, tmp_path):
     back = skinfit.load_fit(ca_fit.save(tmp_path / "fit.nc"))
     np.testing.assert_array_equal(back.idata["derived"]["gamma"].values, der["gamma"].values)
     pd.testing.assert_frame_equal(back.summary(), table)
+
+
+def test_pointwise_groups_of_two_lognormal_observables(ca_fit):
+    check_pointwise_groups(ca_fit)
 
 
 def test_derived_function_must_return_the_declared_quantities(tmp_path):
