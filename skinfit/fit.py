@@ -192,7 +192,9 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
     t_prior = post.sample_prior(n_prior_draws, rng)
     # after the prior draws, the last draw of a fit: the predictive draws' own generator
     deferred = _Deferred(theta, nw, nd, rng.integers(2**63, size=4))
-    lp_nat = post.log_prior(theta) + post.log_likelihood(theta)
+    # the chain's own log density, less the sampling map's Jacobian: log prior + log likelihood in
+    # natural parameters with no further forward call (wavy_surface, 4000 draws: 0.2 s)
+    lp_nat = run.log_prob.reshape(-1) - post.log_jacobian(run.chain.reshape(-1, d))
     posterior, prior_group, dims, coords = {}, {}, {}, {"obs_id": np.arange(post.n)}
     for pname in list(post.model.parameter_names) + list(post.noise_names):
         cols = [j for j, s in enumerate(post.slots) if s.base == pname]
