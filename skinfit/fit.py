@@ -308,23 +308,19 @@ def _derived_summary(tree):
 
 
 def _wall_time_text(t, pending=False):
-    """The timings of a fit (see :func:`fit`) in one line."""
+    """The timings of a fit (see :func:`fit`) in one line, as ``skinfit fit`` and the report's
+    diagnostics show them; the deferred groups' time once computed ('deferred' while
+    :attr:`Fit.pending`; nothing for a fit saved before they were deferred, whose ``tree_s``
+    includes them)."""
     if t.get("resumed"):
-        text = (f"wall time: resumed from a checkpoint (MAP {t['map_s']:.2f} s in the first run), sampling "
+        text = (f"resumed from a checkpoint (MAP {t['map_s']:.2f} s in the first run), sampling "
                 f"{t['sampling_s']:.2f} s over all runs, result tree {t['tree_s']:.2f} s, this call {t['total_s']:.2f} s")
     else:
-        text = (f"wall time: MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, "
+        text = (f"MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, "
                 f"sampling {t['sampling_s']:.2f} s, result tree {t['tree_s']:.2f} s, total {t['total_s']:.2f} s")
-    deferred = _pointwise_text(t, pending)
-    return f"{text}; {deferred}" if deferred else text
-
-
-def _pointwise_text(t, pending):
-    """When and in how long the deferred groups were computed ('' for a fit saved before they
-    were deferred, whose ``tree_s`` includes them)."""
     if "pointwise_s" in t:
-        return f"pointwise log-likelihood and predictive draws {t['pointwise_s']:.2f} s (on first use)"
-    return "pointwise log-likelihood and predictive draws deferred until first use" if pending else ""
+        return f"{text}; pointwise log-likelihood and predictive draws {t['pointwise_s']:.2f} s (on first use)"
+    return f"{text}; pointwise log-likelihood and predictive draws deferred until first use" if pending else text
 
 
 @lru_cache(maxsize=1)
@@ -488,7 +484,7 @@ class Fit:
                  + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
                  + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
                  f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
-                 _wall_time_text(t, self.pending),
+                 f"wall time: {_wall_time_text(t, self.pending)}",
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
                  + (f" ({self.attrs.get('support_condition')})" if c["outside_support"] else ""),

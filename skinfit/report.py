@@ -20,7 +20,7 @@ import pandas as pd
 
 from . import plots
 from .errors import InputError
-from .fit import _pointwise_text
+from .fit import _wall_time_text
 from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report"]
@@ -148,11 +148,7 @@ def fit_diagnostics(fit, summary=None):
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.attrs.get("map_log_density", float("nan"))),
         f"best of {len(starts)} optimiser runs, final status {starts[-1]['status'] if starts else 'n/a'}", "info")
-    deferred = _pointwise_text(t, fit.pending)
-    add("wall time [s]", float(t["total_s"]), f"MAP {t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, "
-        f"result tree {t['tree_s']:.2f} s"
-        + (" (resumed from a checkpoint: this call's wall time; MAP in the first run, sampling over all runs)"
-           if t.get("resumed") else "") + (f"; {deferred}" if deferred else ""), "info")
+    add("wall time [s]", float(t["total_s"]), _wall_time_text(t, fit.pending), "info")
     table = pd.DataFrame(rows, columns=["check", "value", "criterion", "status"]).set_index("check")
     return table, issues
 

@@ -86,7 +86,7 @@ INDEPENDENCE_WEIGHT = 0.8
 INDEPENDENCE_SUBSTEPS = 3
 #: Steps between the first convergence checks of a fit (the interval grows to 10% of the chain).
 #: 50: with three independence updates a step the shipped posteriors converge after 100-250
-#: steps (ultrasonic 250-550), a step costs 0.6-0.8 ms and a check 0.5-2 ms, 7-15 ms once it
+#: steps (ultrasonic 150-300 since it samples log(mu_inf/(1+q)), 250-550 before), a step costs 0.6-0.8 ms and a check 0.5-2 ms, 7-15 ms once it
 #: computes R-hat (when the other criteria pass) (electroadhesion, median of 6 seeds: 200 ->
 #: 150 steps, sampling 0.12 -> 0.10 s).
 CHECK_EVERY = 50

@@ -9,8 +9,9 @@ from skinfit.posterior import noise_suffix
 
 def check_pointwise_groups(fit):
     """Shapes (chain, draw, obs_id); the pointwise log-likelihood summed over rows and
-    observables against ``sample_stats.lp`` - log prior (``lp`` sums the likelihood by
-    sufficient statistics of repeated rows: another code path), rtol 1e-9; and the predictive
+    observables against ``sample_stats.lp`` - log prior (``lp`` is the chain's own log
+    density less the sampling map's Jacobian, evaluated on distinct rows by sufficient
+    statistics: another code path), rtol 1e-9; and the predictive
     draws against ``Model.predict`` at every posterior draw: for normal noise y_rep - mu, for
     log-normal log y_rep - log mu, is sigma times independent standard normals, so its mean
     over the N draws has standard error sqrt(sum sigma^2) / N in each row (5 standard errors

@@ -359,3 +359,16 @@ def test_interpolation_of_degenerate_designs(velocity, amp):
             star = a["mu_inf"] + (a["mu_inf"] - a["mu_0"]) * np.exp(-v * v / a["k_V"])
             want_j = 2 * star * (a["q"] + 1) * (v / a["V0"] * (1 - e) - e) / (1 + a["q"] - e)
             np.testing.assert_allclose(got[:, j], want_j, rtol=1e-13)
+
+
+def test_q_slope_of_log_mu_behind_the_mu_inf_shear():
+    """The reason models/ultrasonic.toml samples log(mu_inf / (1 + q)) (mu_inf_offset): at
+    q -> 0, d log mu_E / dq = 1 - 1/(1 - E) = -1/(exp(V0/V) - 1), E = exp(-V0/V) (eq. 3
+    differentiated by hand), about -1 at V ~ 1.5 V0 and log(1 + q) ~ q there.  Central
+    differences of mu_equilibrium at q = 1e-4 +- 1e-6 against the closed form."""
+    v0, h, q = 0.068, 1e-6, 1e-4
+    v = v0 * np.array([0.3, 1.0, 1.5, 2.0])
+    slope = (np.log(us.mu_equilibrium(v, 1.8, q + h, v0)) - np.log(us.mu_equilibrium(v, 1.8, q - h, v0))) / (2 * h)
+    closed = -1.0 / np.expm1(v0 / v)
+    np.testing.assert_allclose(slope, closed, rtol=1e-3)
+    assert closed[2] == pytest.approx(-1.0, abs=0.06)

@@ -39,8 +39,8 @@ import numpy as np
 
 from ._cache import by_value
 
-__all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic", "ultrasonic_projected", "mu_inf_offset",
-           "ultrasonic_constant_mu"]
+__all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic", "ultrasonic_projected",
+           "ultrasonic_constant_mu", "mu_inf_offset"]
 
 #: Gauss-Legendre nodes per smooth piece of the half period (convergence shown by the tests).
 PHASES = 48
