@@ -89,17 +89,23 @@ def test_adaptive_run_is_exact_and_refits_on_schedule(rng):
 
 
 def test_walkers_placed_around_a_map_in_a_corner_of_the_prior(rng):
-    """With uniform priors the electroadhesion MAP sits on two upper bounds (E_star, phi):
-    three quarters of any ball around it lie outside; every walker is still placed inside."""
+    """With uniform priors the electroadhesion posterior piles up against two upper bounds
+    (E_star, phi): a centre on both bounds has three quarters of any ball around it outside the
+    prior, and every walker is still placed inside.  The corner is set by hand (the MAP's other
+    coordinates, E_star and phi at their bounds): where a multistart optimiser stops on that
+    flat ridge is not what this test is about."""
     post = Posterior(skinfit.load_model("electroadhesion"), skinfit.load_priors(str(BENCH_PRIORS)),
                      skinfit.load_dataset("electroadhesion_synthetic"))
-    corner = find_map(post, np.random.default_rng(3), n_local=4).theta
-    assert corner[post.names.index("E_star")] == pytest.approx(post._hi[post.names.index("E_star")], rel=1e-9)
-    assert corner[post.names.index("phi")] == pytest.approx(post._hi[post.names.index("phi")], rel=1e-9)
+    corner = find_map(post, np.random.default_rng(3), n_local=4).theta.copy()
+    for name in ("E_star", "phi"):  # a hair inside: exp(log(hi)) may round one ulp above hi
+        corner[post.names.index(name)] = post._hi[post.names.index(name)] * (1 - 1e-12)
     z0 = post.to_z(corner[None])[0]
     assert np.isfinite(post(z0[None]))[0]
     p0 = initial_ball(post, z0, np.eye(post.ndim), 64, rng)
     assert np.all(np.isfinite(post(p0))) and len(np.unique(p0, axis=0)) == 64
+    # the ball really straddles the corner: without the placement rule most draws fall outside
+    naive = z0 + 0.1 * rng.normal(size=(256, post.ndim))
+    assert np.mean(np.isfinite(post(naive))) < 0.5
 
 
 def test_importance_start_improves_a_poor_proposal_and_places_walkers(rng):
