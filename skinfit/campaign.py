@@ -33,10 +33,19 @@ Each fit's seed is :func:`skinfit.groups.derive_seed` of the campaign seed and t
 number of workers, the order of completion nor on which other fits the campaign holds.
 Results go to ``out/<model>/<dataset>/<group>/fit.nc`` (written atomically by
 :meth:`skinfit.Fit.save`) with ``summary.csv`` and ``task.json`` (the fit's specification,
-written after the result).  A fit is complete when its ``task.json`` matches the current
-specification (model card, priors and data hashes, options, seed and the sampler's settings,
-:func:`skinfit.sampling.sampler_settings`) and its ``fit.nc`` opens with the same seed; a
-restarted campaign (after a crash or a kill) skips complete fits and runs only the others.  ``out/index.csv`` and
+written after the result).  Model and dataset ids must be plain names (letters, digits, ``.``,
+``_``, ``-``; never a path) and unique within the campaign; a group's folder is a slug of its
+label plus a hash of the exact label (:func:`skinfit.groups.group_dir`); every output path is
+checked to stay under ``out``.  A dataset or model entry that names an existing file is read
+from that file (as an absolute path), whatever its card's id.  Every fit records what it was
+fitted to (its ``source`` attr: the card's absolute path and the sha256 of card and data file;
+its ``group``), as do ``task.json`` and the index.  A fit is complete when the saved result
+holds this group of these data (hash), model card and priors (hashes) and seed, and its
+``task.json`` matches the current specification (options and the sampler's settings,
+:func:`skinfit.sampling.sampler_settings`); a saved fit that does not is reported ("stale")
+and fitted again.  A restarted campaign (after a crash or a kill) skips complete fits and runs
+only the others; temporary files of writers that died are removed first.  One campaign at a
+time may write to an ``out`` (a second gets ``OUT: is in use by pid N``).  ``out/index.csv`` and
 ``out/index.json`` list every fit (status, seconds, converged, worker, peak memory), rewritten
 after each result; ``out/campaign.log`` records what each run started, skipped and finished.
 
@@ -44,13 +53,18 @@ Executors: local processes (``concurrent.futures.ProcessPoolExecutor``, spawn) b
 ``--scheduler local`` starts a Dask ``LocalCluster`` (one thread per worker process);
 ``--scheduler tcp://HOST:PORT`` submits to a running Dask scheduler, whose workers must see
 the same file system (they read the cards and datasets, and write the results, themselves).
+Local workers (processes and our LocalCluster's) end when the campaign's process dies, even by
+SIGKILL.  Dask keys hash the whole task (:func:`task_key`), so campaigns sharing a scheduler
+never share a task unless it is the same fit into the same file.
 """
 
+import hashlib
 import json
 import multiprocessing
 import os
 import resource
 import socket
+import threading
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -60,11 +74,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ._toml import read_toml, require
+from ._toml import ROOT, find_file, read_toml, require
+from .checkpoint import CheckpointLock, remove_stale_temps, temp_file
 from .data import load_dataset
 from .errors import ConvergenceWarning, InputError
 from .fit import fit
-from .groups import _write_json, derive_seed, group_dir, group_labels
+from .groups import (_write_json, check_name, derive_seed, group_dir, group_labels, inside, record_source,
+                     source_problem)
 from .models import NOISE_MODELS, load_model
 from .priors import load_priors
 from .sampling import sampler_settings
@@ -76,7 +92,7 @@ _TOP_KEYS = {"schema_version", "seed", "out", "models", "datasets", "by", "sched
 _FIT_KEYS = {"ess": (float, "ess_target"), "max_steps": (int, "max_steps"), "noise": (str, "noise"),
              "nwalkers": (int, "nwalkers")}
 _INDEX_COLUMNS = ["model", "dataset", "group", "seed", "status", "seconds", "converged", "path",
-                  "worker", "peak_rss_mb"]
+                  "worker", "peak_rss_mb", "dataset_path", "dataset_sha256"]
 
 
 @dataclass(frozen=True)
@@ -95,6 +111,22 @@ def _resolve(name, base):
     """A path relative to the campaign file when it names an existing file or folder, else an id."""
     p = base / name
     return str(p.resolve()) if p.exists() else name
+
+
+def _card(kind, ref):
+    """The absolute path of the card a reference loads (a path as given, or the shipped id's)."""
+    card = find_file(kind, ref)
+    return str((card if card.is_absolute() or card.exists() else ROOT / card).resolve())
+
+
+def _unique_id(seen, obj_id, entry, kind, where, card):
+    """Two entries with one id would share result folders: refuse it, naming both."""
+    if obj_id in seen:
+        first, first_card = seen[obj_id]
+        raise InputError(where, f"{kind} id {obj_id!r} ({card}) is also the id of {first} ({first_card}); "
+                         "two entries with one id would share result folders: give one card another id",
+                         field=entry)
+    seen[obj_id] = (entry, card)
 
 
 def _str_list(doc, key, where, required=True):
@@ -141,12 +173,15 @@ def load_campaign(path):
             raise InputError(where, f"expected a number > 0 (got {value})", field=f"fit.{key}")
         options[name] = value
 
-    models = {}
+    models, model_cards, seen = {}, {}, {}
     for i, name in enumerate(_str_list(doc, "models", where)):
         try:
-            models[name] = load_model(_resolve(name, base))
+            model_cards[name] = _card("models", _resolve(name, base))
+            models[name] = load_model(model_cards[name])
         except InputError as exc:
             raise InputError(where, str(exc), field=f"models[{i}]") from None
+        check_name(models[name].id, "model id", f"{where}: models[{i}]")
+        _unique_id(seen, models[name].id, f"models[{i}]", "model", where, model_cards[name])
     priors_doc = require(doc, "priors", dict, where, default={})
     split_doc = require(doc, "split", dict, where, default={})
     for table, key in ((priors_doc, "priors"), (split_doc, "split")):
@@ -178,19 +213,22 @@ def load_campaign(path):
         splits[name] = split or None
 
     by = _str_list(doc, "by", where, required=False)
-    tasks, sampler = [], sampler_settings()
+    tasks, sampler, seen = [], sampler_settings(), {}
     for i, name in enumerate(_str_list(doc, "datasets", where)):
-        ref = _resolve(name, base)
         try:
+            # the card actually read, as an absolute path: a path entry whose card id equals a
+            # shipped dataset's is fitted from that path, never from the shipped folder
+            ref = _card("datasets", _resolve(name, base))
             dataset = load_dataset(ref)
         except InputError as exc:
             raise InputError(where, str(exc), field=f"datasets[{i}]") from None
+        check_name(dataset.id, "dataset id", f"{where}: datasets[{i}]")
+        _unique_id(seen, dataset.id, f"datasets[{i}]", "dataset", where, ref)
         for c in by:
             if c not in dataset.frame.columns:
                 raise InputError(where, f"dataset {dataset.id!r} has no column {c!r} (columns: "
                                  f"{', '.join(dataset.frame.columns)})", field="by")
         levels = group_labels(dataset, by)[1] if by else [""]
-        ref = ref if ref != name else dataset.id
         for mname, model in models.items():
             for split_cols in (splits[mname] or {}).values():
                 for c in [split_cols] if isinstance(split_cols, str) else split_cols:
@@ -199,7 +237,7 @@ def load_campaign(path):
                                          field=f"split.{mname}")
             for label in levels:
                 rel = Path(model.id) / dataset.id / (group_dir(label) if label else "all") / "fit.nc"
-                tasks.append({"model": model.id, "model_ref": _resolve(mname, base), "dataset": dataset.id,
+                tasks.append({"model": model.id, "model_ref": model_cards[mname], "dataset": dataset.id,
                               "dataset_ref": ref, "by": by, "group": label,
                               "seed": derive_seed(seed, model.id, dataset.id, label),
                               "priors": priors[mname], "split": splits[mname], "options": options,
@@ -208,7 +246,7 @@ def load_campaign(path):
                               "sha256": {"model": model.sha256, "priors": prior_hashes[mname],
                                          "dataset": dataset.sha256},
                               "sampler": sampler,
-                              "path": str(out / rel)})
+                              "path": str(inside(out, out / rel))})
     return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers)
 
 
@@ -220,6 +258,10 @@ def run_fit(task):
     """Run one campaign fit and write its result (top level and picklable: processes and Dask)."""
     t0 = time.perf_counter()
     dataset = load_dataset(task["dataset_ref"])
+    if dataset.sha256 != task["sha256"]["dataset"]:
+        raise InputError(task["dataset_ref"], f"the data changed since the campaign was read (sha256 "
+                         f"{task['sha256']['dataset'][:12]}.. -> {dataset.sha256[:12]}..): run the campaign again")
+    full = dataset
     if task["by"]:
         labels, _ = group_labels(dataset, task["by"])
         dataset = dataset.subset(np.array(labels, dtype=object) == task["group"], task["group"])
@@ -227,9 +269,14 @@ def run_fit(task):
         warnings.simplefilter("ignore", ConvergenceWarning)  # recorded in the index instead
         result = fit(task["model_ref"], dataset, priors=task["priors"], rng=task["seed"], split=task["split"],
                      **task["options"])
+    for key in ("model", "priors"):
+        if result.attrs[f"{key}_sha256"] != task["sha256"][key]:
+            raise InputError(task[f"{key}_ref" if key == "model" else key], f"the {key} file changed since "
+                             "the campaign was read: run the campaign again")
+    record_source(result, full, task["group"], task["by"])
     path = Path(task["path"])
     result.save(path)
-    (path.parent / "summary.csv").write_text(result.summary().to_csv())
+    _write_text(path.parent / "summary.csv", result.summary().to_csv())
     record = {"status": "done", "seconds": round(time.perf_counter() - t0, 3), "converged": result.converged,
               "worker": f"{socket.gethostname()}:{os.getpid()}",
               "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
@@ -238,23 +285,36 @@ def run_fit(task):
 
 
 def _completed(task):
-    """The saved record of a complete fit with this specification, or None."""
+    """``(record, problem)``: the saved record of a complete fit with this specification (else
+    None), and why a fit found in the task's folder is not reused (else None)."""
     import arviz as az
 
     path = Path(task["path"])
     record_path = path.parent / "task.json"
-    if not (path.exists() and record_path.exists()):
-        return None
+    if not path.exists():
+        return None, None
+    try:
+        tree = az.from_netcdf(path)
+        attrs = dict(tree.attrs)
+        tree.close()
+    except (OSError, ValueError) as exc:
+        return None, f"unreadable fit.nc ({type(exc).__name__})"
+    # the result itself must say it is this fit: data, cards, group and seed
+    problem = source_problem(attrs, task["group"], task["sha256"]["dataset"])
+    for key in ("model", "priors"):
+        if problem is None and attrs.get(f"{key}_sha256") != task["sha256"][key]:
+            problem = f"fitted with another {key} file (sha256 {str(attrs.get(f'{key}_sha256'))[:12]}..)"
+    if problem is None and attrs.get("seed") != task["seed"]:
+        problem = f"fitted with seed {attrs.get('seed')}, not {task['seed']}"
+    if problem is not None:
+        return None, problem
     try:
         record = json.loads(record_path.read_text())
-        if json.dumps(record.get("spec"), sort_keys=True) != _spec(task):
-            return None
-        tree = az.from_netcdf(path)
-        seed = tree.attrs.get("seed")
-        tree.close()
     except (OSError, ValueError):
-        return None
-    return record if seed == task["seed"] else None
+        return None, None  # killed between the result and its record: run again
+    if json.dumps(record.get("spec"), sort_keys=True) != _spec(task):
+        return None, "its task.json records other options or sampler settings"
+    return record, None
 
 
 def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
@@ -273,15 +333,28 @@ def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
     workers = workers or campaign.workers or os.cpu_count() or 1
     out = campaign.out
     out.mkdir(parents=True, exist_ok=True)
+    with CheckpointLock(out / "campaign"):  # one campaign at a time per out (else "OUT is in use by pid N")
+        return _run_locked(campaign, scheduler, workers, echo)
+
+
+def _run_locked(campaign, scheduler, workers, echo):
+    out = campaign.out
+    stale = remove_stale_temps(out)
     log = open(out / "campaign.log", "a", buffering=1)
+    for p in stale:
+        log.write(f"{_now()} removed {os.path.relpath(p, out)} (left by a killed writer)\n")
     executor = scheduler or f"processes x {workers}"
     log.write(f"{_now()} start {campaign.path} ({len(campaign.tasks)} fits, executor {executor})\n")
     rows, todo = [], []
     for i, task in enumerate(campaign.tasks):
         row = {"model": task["model"], "dataset": task["dataset"], "group": task["group"], "seed": task["seed"],
                "status": "pending", "seconds": np.nan, "converged": None,
-               "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan}
-        done = _completed(task)
+               "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan,
+               "dataset_path": task["dataset_ref"], "dataset_sha256": task["sha256"]["dataset"]}
+        done, problem = _completed(task)
+        if problem is not None:
+            echo(f"  stale    {_key(task)}: the saved fit is not reused: {problem}")
+            log.write(f"{_now()} stale {_key(task)}: {problem}\n")
         if done is not None:
             row.update({k: done[k] for k in ("seconds", "converged", "worker", "peak_rss_mb")}, status="complete")
             log.write(f"{_now()} skip {_key(task)} (complete)\n")
@@ -309,7 +382,8 @@ def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
             log.write(f"{_now()} run {_key(campaign.tasks[i])}\n")
         if todo and scheduler is None:
             ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
+                                     initargs=(os.getpid(),)) as pool:
                 futures = {pool.submit(run_fit, campaign.tasks[i]): i for i in todo}
                 for fut in as_completed(futures):
                     _collect(fut, futures[fut], finish)
@@ -336,15 +410,15 @@ def _run_dask(campaign, todo, scheduler, workers, finish):
     cluster = None
     if scheduler == "local":
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
+        client = Client(cluster)  # its worker processes end with ours, even on a SIGKILL (Dask's own watch)
     else:
         try:
             client = Client(scheduler, timeout=30)
         except OSError as exc:
             raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
     try:
-        futures = {client.submit(run_fit, campaign.tasks[i], key=f"skinfit-fit-{campaign.tasks[i]['seed']}",
-                                 pure=False): i for i in todo}
+        futures = {client.submit(run_fit, campaign.tasks[i], key=task_key(campaign.tasks[i]), pure=False): i
+                   for i in todo}
         for fut in dask_completed(list(futures)):
             _collect(fut, futures[fut], finish)
     finally:
@@ -353,12 +427,40 @@ def _run_dask(campaign, todo, scheduler, workers, finish):
             cluster.close()
 
 
+def task_key(task):
+    """The Dask key of a fit: a hash of its whole specification and output path, so two
+    campaigns on one scheduler share a key only when they are the same fit into the same file."""
+    digest = hashlib.sha256((_spec(task) + "\0" + task["path"]).encode()).hexdigest()[:32]
+    return f"skinfit-fit-{task['seed']}-{digest}"
+
+
+def _watch_parent(pid, interval=0.5):
+    """In a worker process started by the campaign process ``pid``: a daemon thread that ends
+    the worker when its parent is no longer ``pid`` (the campaign was killed, even by SIGKILL,
+    and the worker re-parented), so no worker goes on writing after its campaign died."""
+
+    def watch():
+        while os.getppid() == pid:
+            time.sleep(interval)
+        os._exit(70)
+
+    threading.Thread(target=watch, name="skinfit-parent-watch", daemon=True).start()
+
+
+def _write_text(path, text):
+    tmp = temp_file(path)
+    try:
+        Path(tmp).write_text(text)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
 def _write_index(out, rows):
     table = pd.DataFrame(rows, columns=_INDEX_COLUMNS)
     _write_json(out / "index.json", rows)
-    tmp = out / "index.csv.tmp"
-    table.to_csv(tmp, index=False)
-    os.replace(tmp, out / "index.csv")
+    _write_text(out / "index.csv", table.to_csv(index=False))
 
 
 def _key(task):
@@ -375,7 +477,7 @@ def cli_campaign(args):
     campaign = load_campaign(args.campaign)
     table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
-        print(table.drop(columns=["path", "worker"]).to_string(index=False))
+        print(table.drop(columns=["path", "worker", "dataset_path", "dataset_sha256"]).to_string(index=False))
     failed = ~table["status"].isin(["done", "complete"])
     unconverged = sum(c is False for c in table["converged"])
     print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "

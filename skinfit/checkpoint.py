@@ -30,6 +30,8 @@ order or sampling setup is refused with an :class:`~skinfit.errors.InputError`.
 
 import json
 import os
+import re
+import socket
 import tempfile
 import time
 from dataclasses import dataclass
@@ -41,7 +43,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["FORMAT", "run_identity", "Checkpoint", "Saved", "load_checkpoint", "CheckpointLock",
-           "map_record", "map_from_record"]
+           "map_record", "map_from_record", "temp_file", "remove_stale_temps"]
 
 #: Version of the checkpoint layout and of the sampler that wrote it; a checkpoint of another
 #: version is refused (2: adaptive independence proposal, whose chain a format-1 run cannot continue).
@@ -285,8 +287,7 @@ def write_atomic(path, build):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
+    tmp = temp_file(path)
     try:
         with h5py.File(tmp, "w") as f:
             build(f)
@@ -315,11 +316,64 @@ def _fsync_dir(directory):
         os.close(fd)
 
 
-class CheckpointLock:
-    """An exclusive lock beside a checkpoint: two processes never run the same fit at once.
+def _host():
+    return re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname())[:40] or "host"
 
-    Uses ``fcntl.flock`` on ``.<name>.lock`` (released by the kernel if the process dies);
-    where ``fcntl`` is unavailable the lock is a no-op.
+
+#: Temporary files of an atomic write: ``.<name>.<host>.<pid>-<random>.tmp`` beside the target.
+_TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9-]+)\.(?P<pid>\d+)-[A-Za-z0-9_]+\.tmp$")
+
+
+def temp_file(path):
+    """A new empty temporary file beside ``path`` (returned as a str) for an atomic write.
+
+    Its name holds the host and pid of the writer and a random part, so concurrent writers
+    never share one and :func:`remove_stale_temps` can tell a dead writer's leftovers from a
+    live one's.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{_host()}.{os.getpid()}-", suffix=".tmp")
+    os.close(fd)
+    return tmp
+
+
+def _pid_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
+
+
+def remove_stale_temps(folder, *, recursive=True):
+    """Delete the temporary files (:func:`temp_file`) under ``folder`` whose writer is dead.
+
+    Only names of our pattern written on this host are considered, and only those whose pid
+    no longer runs; a live writer's file (here or on another host) is left alone.  Returns
+    the paths removed.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    host, removed = _host(), []
+    for p in (folder.rglob(".*.tmp") if recursive else folder.glob(".*.tmp")):
+        m = _TEMP.match(p.name)
+        if m and m["host"] == host and int(m["pid"]) != os.getpid() and not _pid_alive(int(m["pid"])):
+            p.unlink(missing_ok=True)
+            removed.append(p)
+    return removed
+
+
+class CheckpointLock:
+    """An exclusive lock on a run folder: two processes never write the same results at once.
+
+    Uses ``fcntl.flock`` on ``.<name>.lock`` beside ``path`` (released by the kernel if the
+    process dies), with the holder's pid written into it; a second process gets the one-line
+    InputError ``OUT is in use by pid N`` (it does not wait).  ``skinfit fit --out``,
+    ``skinfit fit --by`` and campaigns take it on their output folder.  Where ``fcntl`` is
+    unavailable the lock is a no-op.
     """
 
     def __init__(self, path):
@@ -333,21 +387,36 @@ class CheckpointLock:
         except ImportError:  # pragma: no cover - not POSIX
             return self
         self.lock_path.parent.mkdir(parents=True, exist_ok=True)
-        self._fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(self._fd)
-            self._fd = None
-            raise InputError(self.path, "another skinfit process is running this fit (its lock "
-                             f"{self.lock_path.name} is held); wait for it or use another --out") from None
+        while True:
+            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                try:
+                    holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+                finally:
+                    os.close(fd)
+                raise InputError(self.path.parent, f"is in use by pid {holder} (lock {self.lock_path.name}); "
+                                 "wait for it to finish or use another --out") from None
+            # the holder before us may have unlinked the file after we opened it: lock the live one
+            try:
+                same = os.stat(self.lock_path).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self._fd = fd
         for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):  # left by a killed writer
             stale.unlink(missing_ok=True)
+        remove_stale_temps(self.path.parent, recursive=False)
         return self
 
     def __exit__(self, *exc):
         if self._fd is not None:
+            self.lock_path.unlink(missing_ok=True)
             os.close(self._fd)
             self._fd = None
-            self.lock_path.unlink(missing_ok=True)
         return False

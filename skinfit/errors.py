@@ -23,6 +23,15 @@ class InputError(ValueError):
             loc += f", row {row}"
         super().__init__(f"{loc}: {what}")
 
+    def __reduce__(self):
+        # keyword-only field/row: the default reduction (cls, self.args) cannot rebuild it, so a
+        # campaign worker's error would not cross the process boundary (and its message be lost)
+        return (_rebuild, (type(self), self.where, self.what, self.field, self.row))
+
+
+def _rebuild(cls, where, what, field, row):
+    return cls(where, what, field=field, row=row)
+
 
 class ConvergenceWarning(UserWarning):
     """A fit did not meet its convergence criteria."""

@@ -10,7 +10,6 @@ of the tree's cost, are computed on first use (:attr:`Fit.idata`, :meth:`Fit.sav
 
 import json
 import os
-import tempfile
 import time
 import warnings
 from dataclasses import dataclass
@@ -499,8 +498,9 @@ class Fit:
         pending fit is completed first)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".nc.tmp")
-        os.close(fd)
+        from .checkpoint import temp_file
+
+        tmp = temp_file(path)  # unique per writer; a killed writer's is removed by the next run
         try:
             self.idata.to_netcdf(tmp, engine="h5netcdf")
             with open(tmp, "rb") as f:

@@ -2,8 +2,12 @@
 
 ``skinfit fit MODEL DATASET --by subject --out RUN`` writes, for every subject,
 ``RUN/<group>/fit.nc`` and ``summary.csv``, plus ``RUN/index.json`` listing every group with
-its label, rows, seed, convergence and path.  Parameters split by a condition column *inside*
-one fit (``split=``) stay available within each group's fit.
+its label, rows, seed, convergence and path, and the dataset's card path and sha256.  The
+folder of a group is :func:`group_dir` of its label (distinct for distinct labels); each fit
+records its label and data hash, which :func:`load_groups` checks.  The run holds the lock a
+plain ``skinfit fit --out RUN`` takes, so two runs into one folder cannot interleave.
+Parameters split by a condition column *inside* one fit (``split=``) stay available within
+each group's fit.
 
 Seeds: every group's seed is derived from the one base seed and the group's label
 (:func:`derive_seed`), so a group's samples do not depend on which other groups exist or on
@@ -13,8 +17,9 @@ the order in which the groups are fitted.
 import hashlib
 import json
 import os
-import tempfile
+import re
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +31,11 @@ from .fit import fit, load_fit
 from .models import Model, load_model
 from .posterior import _level_labels
 
-__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups"]
+__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside",
+           "record_source", "source_problem", "data_drift"]
+
+#: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
+NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
 def derive_seed(seed, *key):
@@ -62,9 +71,59 @@ def group_labels(dataset, by, where="--by"):
 
 
 def group_dir(label):
-    """A file-system-safe folder name for a group label (``subject=S01`` -> ``subject-S01``)."""
-    safe = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in label.replace("=", "-"))
-    return safe if label.isascii() else f"{safe}-{hashlib.sha256(label.encode()).hexdigest()[:8]}"
+    """The folder of one group: a readable slug plus 8 hex of the sha256 of the exact label.
+
+    ``subject=S01`` -> ``subject-S01-<hash>``.  Labels that differ only in characters a folder
+    name cannot hold (``a/b``, ``a b``, ``a_b``) or only in case get distinct folders, and the
+    name is a plain name (never ``..``, never a path), at most ~70 characters.
+    """
+    slug = re.sub(r"[^A-Za-z0-9._-]", "_", label.replace("=", "-"))[:60].lstrip("._-") or "g"
+    return f"{slug}-{hashlib.sha256(label.encode()).hexdigest()[:8]}"
+
+
+def check_name(value, what, where):
+    """``value`` if it is a name fit for a folder (:data:`NAME`), else an InputError."""
+    if not isinstance(value, str) or not NAME.match(value) or value in (".", ".."):
+        raise InputError(where, f"{what} {value!r} cannot name a result folder: expected a name of letters, "
+                         "digits, '.', '_' and '-' starting with a letter or digit (no '/', no '..')")
+    return value
+
+
+def inside(out, path):
+    """``path`` resolved, after checking that it stays under ``out`` (InputError otherwise)."""
+    root, target = Path(out).resolve(), Path(path).resolve()
+    if not target.is_relative_to(root):
+        raise InputError(path, f"would be written outside the output folder {root}")
+    return target
+
+
+def record_source(result, dataset, label, by):
+    """Record in a fit's attrs what it was fitted to: the exact group label and the whole
+    dataset's card path and sha256 (card + data file), checked when the result is reused."""
+    result.idata.attrs["group"] = label
+    result.idata.attrs["group_by"] = json.dumps(list(by))
+    result.idata.attrs["source"] = json.dumps({"path": card_path(dataset), "sha256": dataset.sha256})
+
+
+def card_path(dataset):
+    """The absolute path of a dataset's card (``Dataset.path`` is shown relative to the checkout)."""
+    from ._toml import ROOT
+
+    p = Path(dataset.path)
+    return str((p if p.is_absolute() or not (ROOT / p).exists() else ROOT / p).resolve())
+
+
+def source_problem(attrs, label, sha256):
+    """Why a saved fit (its root ``attrs``) is not the fit of group ``label`` of the data with
+    ``sha256``, or None.  Fits written before these records existed are judged by their ids."""
+    if "source" in attrs:
+        saved = json.loads(attrs["source"])["sha256"]
+        if saved != sha256:
+            return f"fitted to data with sha256 {saved[:12]}.., the data now have {sha256[:12]}.."
+        if attrs.get("group", "") != label:
+            return f"holds the fit of group {attrs.get('group')!r}, not {label!r}"
+        return None
+    return "records no data hash (written by an older skinfit)"
 
 
 def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, noise=None,
@@ -88,44 +147,127 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     pandas.DataFrame
         The index: one row per group (label, rows, seed, converged, seconds, path).
     """
+    from .checkpoint import CheckpointLock, remove_stale_temps
+
     model = model if isinstance(model, Model) else load_model(model)
-    dataset = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+    from_file = not isinstance(dataset, Dataset)  # else it may be a subset: its hash is not the file's
+    dataset = load_dataset(dataset) if from_file else dataset
     by = [by] if isinstance(by, str) else list(by)
     labels, levels = group_labels(dataset, by)
     base = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
     out_dir = Path(out_dir)
     labels = np.array(labels, dtype=object)
     rows = []
-    for label in levels:
-        sub = dataset.subset(labels == label, label)
-        group_seed = derive_seed(base, label)
-        t0 = time.perf_counter()
-        result = fit(model, sub, priors=priors, rng=group_seed, split=split, noise=noise,
-                     progress=progress, ess_target=ess_target, max_steps=max_steps, **fit_options)
-        rel = Path(group_dir(label)) / "fit.nc"
-        result.save(out_dir / rel)
-        (out_dir / rel.parent / "summary.csv").write_text(result.summary().to_csv())
-        rows.append({"group": label, "rows": len(sub), "seed": group_seed, "converged": result.converged,
-                     "seconds": round(time.perf_counter() - t0, 3), "path": rel.as_posix()})
-        _write_json(out_dir / "index.json", {"model": model.id, "dataset": dataset.id, "by": by,
-                                             "seed": base, "groups": rows})
+    header = {"model": model.id, "dataset": dataset.id, "by": by, "seed": base,
+              "dataset_path": card_path(dataset), "dataset_sha256": dataset.sha256, "dataset_is_file": from_file}
+    # the lock a plain `skinfit fit --out` takes: two runs on one folder never interleave
+    with CheckpointLock(out_dir / "checkpoint.h5"):
+        remove_stale_temps(out_dir)  # a killed run's half-written group files (writer pid dead)
+        for label in levels:
+            sub = dataset.subset(labels == label, label)
+            group_seed = derive_seed(base, label)
+            t0 = time.perf_counter()
+            result = fit(model, sub, priors=priors, rng=group_seed, split=split, noise=noise,
+                         progress=progress, ess_target=ess_target, max_steps=max_steps, **fit_options)
+            record_source(result, dataset, label, by)
+            rel = Path(group_dir(label)) / "fit.nc"
+            result.save(inside(out_dir, out_dir / rel))
+            (out_dir / rel.parent / "summary.csv").write_text(result.summary().to_csv())
+            rows.append({"group": label, "rows": len(sub), "seed": group_seed, "converged": result.converged,
+                         "warnings": len(result.warnings), "seconds": round(time.perf_counter() - t0, 3),
+                         "path": rel.as_posix()})
+            _write_json(out_dir / "index.json", {**header, "groups": rows})
     return pd.DataFrame(rows)
 
 
 def load_groups(path):
-    """The fits of a :func:`fit_by` run directory (its ``index.json``): ``{label: Fit}``."""
+    """The fits of a :func:`fit_by` run directory (its ``index.json``): ``{label: Fit}``.
+
+    Each fit must hold the group it is listed under and the data the index records (its
+    ``group`` and ``source`` attrs): a mixed-up or stale folder is an InputError, not a wrong
+    answer.  Data edited since the fits were made gives a warning.
+    """
     path = Path(path)
     index = path / "index.json" if path.is_dir() else path
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json written by `skinfit fit --by`)")
     doc = json.loads(index.read_text())
-    return {g["group"]: load_fit(index.parent / g["path"]) for g in doc["groups"]}
+    fits = {}
+    for g in doc["groups"]:
+        label = g["group"]
+        if label in fits:
+            raise InputError(index, f"group {label!r} is listed twice")
+        fit_path = inside(index.parent, index.parent / g["path"])
+        result = load_fit(fit_path)
+        sha256 = doc.get("dataset_sha256")
+        if sha256 is not None:
+            problem = source_problem(result.attrs, label, sha256)
+        elif result.attrs.get("group", label) != label:  # an index written before the data hash was
+            problem = f"holds the fit of group {result.attrs.get('group')!r}, not {label!r}"
+        else:
+            problem = None
+        if problem:
+            raise InputError(fit_path, f"listed for group {label!r} in {index} but {problem}")
+        fits[label] = result
+    card = doc.get("dataset_path")
+    if card and doc.get("dataset_is_file") and Path(card).exists():
+        try:
+            now = load_dataset(card).sha256
+        except InputError as exc:
+            now = f"unreadable ({exc})"
+        if now != doc["dataset_sha256"]:
+            warnings.warn(f"{index}: the fits were made from {card} with sha256 {doc['dataset_sha256'][:12]}.., "
+                          f"which now has {now[:12]}..: fit again to use the current data", UserWarning,
+                          stacklevel=2)
+    return fits
+
+
+def data_drift(fits):
+    """Messages for the saved fits whose data file has changed since they were made.
+
+    ``fits`` is a list of ``(where, Fit)``; each fit's recorded card path and sha256 (its
+    ``source`` attr, else its ``dataset_path`` and ``dataset_sha256`` when it was fitted to a
+    whole dataset) are compared with the file now there.  Data that cannot be found are not
+    reported (results may be moved to another machine); each card is read once.
+    """
+    from ._toml import ROOT
+
+    current, messages = {}, []
+    for where, result in fits:
+        attrs = result.attrs
+        if "source" in attrs:
+            recorded = json.loads(attrs["source"])
+            card, sha256 = recorded["path"], recorded["sha256"]
+        elif "[" not in attrs.get("dataset_id", "["):  # a subset's hash is not its file's
+            card, sha256 = attrs.get("dataset_path", ""), attrs.get("dataset_sha256")
+            card = str(ROOT / card) if card and not Path(card).is_absolute() else card
+        else:
+            continue
+        if not card or not Path(card).exists():
+            continue
+        if card not in current:
+            try:
+                current[card] = load_dataset(card).sha256
+            except InputError as exc:
+                current[card] = f"unreadable ({exc})"
+        if current[card] != sha256:
+            messages.append(f"{where}: fitted to {card} with sha256 {sha256[:12]}.., which now has "
+                            f"{current[card][:12]}..: this result is not of the current data")
+    return messages
 
 
 def _write_json(path, doc):
     """Write JSON atomically (temporary file + rename)."""
+    from .checkpoint import temp_file
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".json.tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(doc, fh, indent=1, default=str)
-    os.replace(tmp, path)
+    tmp = temp_file(path)
+    try:
+        with open(tmp, "w") as fh:
+            json.dump(doc, fh, indent=1, default=str)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

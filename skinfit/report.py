@@ -445,7 +445,12 @@ def cli_report(args):
     """``skinfit report RUN... --out DIR``."""
     from .fit import load_fit
 
-    fits = [load_fit(p) for p in _collect_runs(args.runs)]
+    from .groups import data_drift
+
+    runs = _collect_runs(args.runs)
+    fits = [load_fit(p) for p in runs]
+    for message in data_drift(list(zip(runs, fits))):  # issue 21: never a stale result unannounced
+        print(f"skinfit report: warning: {message}", file=sys.stderr)
     items = _as_fits(fits)
     comparison = _comparisons(items)
     index = write_report(dict(items), args.out, comparison=comparison)

@@ -206,3 +206,148 @@ def test_another_sampler_makes_the_fit_run_again(tmp_path, monkeypatch):
     monkeypatch.setattr(sampling, "INDEPENDENCE_SUBSTEPS", 2)
     assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["done"]
     assert list(run_campaign(path, echo=lambda *a: None)["status"]) == ["complete"]
+
+
+# ---- issue 21: class 1 (wrong data fitted silently), class 2 (results lost or mixed up), class 4 ----
+def _rows(data):
+    """Per subject, the tangential forces (N) read straight from the CSV."""
+    rows = {}
+    for line in (data / "data.csv").read_text().splitlines()[1:]:
+        subject, _, _, ft = line.split(",")
+        rows.setdefault(subject, []).append(float(ft) * 1e-3)
+    return rows
+
+
+def test_class1_absolute_path_whose_id_is_a_shipped_ones_fits_the_given_file(tmp_path):
+    import json
+
+    data, _ = write_population(tmp_path, n_subjects=1, name="electroadhesion_synthetic")  # the shipped id
+    path = tmp_path / "c.toml"
+    path.write_text(f'schema_version = 1\nseed = 3\nout = "out"\nmodels = ["electroadhesion_coulomb"]\n'
+                    f'datasets = ["{data.resolve()}"]\n[fit]\ness = 100\nmax_steps = 4000\n')
+    table = run_campaign(path, workers=1, echo=lambda *a: None)
+    assert list(table["status"]) == ["done"]
+    card = str((data / "dataset.toml").resolve())
+    fit = skinfit.load_fit(tmp_path / "out" / table["path"][0])
+    np.testing.assert_allclose(fit.idata["observed_data"]["tangential_force"].values, _rows(data)["S01"],
+                               rtol=1e-12)  # 4 rows of this file, not the shipped 216
+    sha = skinfit.load_dataset(card).sha256
+    assert json.loads(fit.attrs["source"]) == {"path": card, "sha256": sha}
+    task = json.loads((tmp_path / "out" / table["path"][0]).parent.joinpath("task.json").read_text())
+    assert task["spec"]["dataset_ref"] == card and task["spec"]["sha256"]["dataset"] == sha
+    index = json.loads((tmp_path / "out" / "index.json").read_text())
+    assert index[0]["dataset_path"] == card and index[0]["dataset_sha256"] == sha
+
+
+def test_class1_two_datasets_with_one_id_are_refused(tmp_path):
+    data, _ = write_population(tmp_path, n_subjects=1, name="electroadhesion_synthetic")
+    path = tmp_path / "c.toml"
+    path.write_text(f'schema_version = 1\nseed = 3\nout = "out"\nmodels = ["electroadhesion_coulomb"]\n'
+                    f'datasets = ["electroadhesion_synthetic", "{data}"]\n')
+    with pytest.raises(skinfit.InputError, match=r"datasets\[1\]: dataset id 'electroadhesion_synthetic' .*is also "
+                       r"the id of datasets\[0\]"):
+        load_campaign(path)
+
+
+def test_class1_a_saved_fit_of_other_data_is_not_reused_and_is_reported(tmp_path):
+    data, _ = write_population(tmp_path, n_subjects=2)
+    path = _campaign(tmp_path, data.name, "stale")
+    first = run_campaign(path, workers=1, echo=lambda *a: None)
+    # S02's folder now holds S01's result, with S02's own task.json beside it
+    s01, s02 = (tmp_path / "stale" / p for p in first["path"])
+    s02.write_bytes(s01.read_bytes())
+    said = []
+    again = run_campaign(path, workers=1, echo=said.append)
+    assert list(again["status"]) == ["complete", "done"]
+    assert any("stale" in s and "subject=S02" in s and "holds the fit of group 'subject=S01'" in s for s in said)
+    assert skinfit.load_fit(s02).attrs["group"] == "subject=S02"
+    # edited data: every fit is reported stale (recorded hash differs) and fitted again
+    csv = data / "data.csv"
+    csv.write_text(csv.read_text().replace("S01,0,200.0000,", "S01,0,200.0001,"))
+    said.clear()
+    assert list(run_campaign(path, workers=1, echo=said.append)["status"]) == ["done", "done"]
+    assert sum("fitted to data with sha256" in s for s in said) == 2
+
+
+def test_class2_input_error_pickles_with_its_message_and_fields():
+    import pickle
+
+    exc = skinfit.InputError("d/data.csv", "expected a force >= 0 (got -0.3 mN)", field="normal_force", row=7)
+    back = pickle.loads(pickle.dumps(exc))
+    assert type(back) is skinfit.InputError and str(back) == str(exc) == \
+        "d/data.csv: normal_force, row 7: expected a force >= 0 (got -0.3 mN)"
+    assert (back.where, back.what, back.field, back.row) == ("d/data.csv", exc.what, "normal_force", 7)
+
+
+def test_class2_a_bad_dataset_in_a_worker_reports_its_message_and_the_others_complete(tmp_path):
+    good, _ = write_population(tmp_path, n_subjects=2, name="good")
+    bad, _ = write_population(tmp_path, n_subjects=1, name="bad", seed=9)
+    path = tmp_path / "c.toml"
+    path.write_text('schema_version = 1\nseed = 3\nout = "out"\nmodels = ["electroadhesion_coulomb"]\n'
+                    'datasets = ["good", "bad"]\nby = ["subject"]\n[fit]\ness = 100\n')
+    campaign = load_campaign(path)
+    (bad / "data.csv").write_text((bad / "data.csv").read_text().replace(",0,", ",zero,", 1))  # edited after
+    table = run_campaign(campaign, workers=2, echo=lambda *a: None)
+    assert list(table["status"][:2]) == ["done", "done"]
+    assert table["status"][2].startswith("failed: InputError: ") and "data.csv" in table["status"][2]
+    assert "voltage" in table["status"][2] and "row 1" in table["status"][2]
+
+
+def test_class2_two_campaigns_differing_in_one_option_never_share_dask_keys(tmp_path):
+    from skinfit.campaign import task_key
+
+    data, _ = write_population(tmp_path, n_subjects=2)
+    a = load_campaign(_campaign(tmp_path, data.name, "a"))
+    b = load_campaign(_campaign(tmp_path, data.name, "b"))
+    keys_a = {task_key(t) for t in a.tasks}
+    assert len(keys_a) == 2 and keys_a.isdisjoint(task_key(t) for t in b.tasks)
+    text = _campaign(tmp_path, data.name, "c").read_text().replace('out = "c"', 'out = "a"').replace(
+        "ess = 100", "ess = 120")
+    (tmp_path / "c.toml").write_text(text)  # same out and seeds, one option differs
+    assert keys_a.isdisjoint(task_key(t) for t in load_campaign(tmp_path / "c.toml").tasks)
+    assert keys_a == {task_key(t) for t in load_campaign(tmp_path / "a.toml").tasks}  # stable
+
+
+def test_class2_a_campaign_refuses_an_out_in_use(tmp_path):
+    from skinfit.checkpoint import CheckpointLock
+
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "busy")
+    with CheckpointLock(tmp_path / "busy" / "campaign"):
+        with pytest.raises(skinfit.InputError, match=rf"busy: is in use by pid {os.getpid()} "):
+            run_campaign(path, echo=lambda *a: None)
+    assert not (tmp_path / "busy" / "index.json").exists()
+
+
+def test_class4_ids_with_path_syntax_are_refused_before_any_write(tmp_path):
+    data, _ = write_population(tmp_path / "d", n_subjects=1)
+    card = data / "dataset.toml"
+    model = tmp_path / "m.toml"
+    model.write_text((Path(skinfit.__file__).resolve().parents[1] / "models" / "electroadhesion_coulomb.toml")
+                     .read_text().replace('id = "electroadhesion_coulomb"', 'id = "../../m"'))
+    cases = [('["electroadhesion_coulomb"]', "../../x", r"datasets\[0\]: dataset id '../../x' cannot name"),
+             ('["electroadhesion_coulomb"]', "/tmp/abs", r"dataset id '/tmp/abs' cannot name"),
+             ('["electroadhesion_coulomb"]', "a/b", r"dataset id 'a/b' cannot name"),
+             (f'["{model}"]', "population", r"models\[0\]: model id '../../m' cannot name")]
+    for models, data_id, match in cases:
+        head, _, rest = card.read_text().split("\n", 2)
+        card.write_text(f'{head}\nid = "{data_id}"\n{rest}')
+        path = tmp_path / "c.toml"
+        path.write_text(f'schema_version = 1\nseed = 3\nout = "o/out"\nmodels = {models}\n'
+                        f'datasets = ["{data}"]\nby = ["subject"]\n[fit]\ness = 100\n')
+        with pytest.raises(skinfit.InputError, match=match):
+            run_campaign(path, echo=lambda *a: None)
+        assert not (tmp_path / "o").exists()
+
+
+def test_class4_inside_refuses_paths_that_leave_out(tmp_path):
+    from skinfit.groups import inside
+
+    assert inside(tmp_path / "out", tmp_path / "out" / "m" / "d" / "fit.nc") == (tmp_path / "out/m/d/fit.nc").resolve()
+    for bad in ("../x", "m/../../x", "/etc/x"):
+        with pytest.raises(skinfit.InputError, match="outside the output folder"):
+            inside(tmp_path / "out", tmp_path / "out" / bad)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "link").symlink_to(tmp_path)
+    with pytest.raises(skinfit.InputError, match="outside the output folder"):
+        inside(tmp_path / "out", tmp_path / "out" / "link" / "fit.nc")

@@ -222,3 +222,48 @@ def test_killed_save_leaves_old_or_new_file(reference, tmp_path, delay):
     # the last completed save, or the one in flight (renamed before the kill, not yet printed)
     assert loaded.idata.attrs["generation"] in (done[-1], done[-1] + 1)
     assert np.array_equal(loaded.idata["posterior"]["mu"].values, reference.idata["posterior"]["mu"].values)
+
+
+# ---- issue 21, class 2: killed saves leave no file behind; one writer per folder --------------------
+def test_class2_stale_temp_files_removed_only_when_their_writer_is_dead(tmp_path):
+    from skinfit.checkpoint import _host, remove_stale_temps, temp_file
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        group = tmp_path / "m" / "d" / "g"
+        group.mkdir(parents=True)
+        mine = Path(temp_file(group / "fit.nc"))  # this process: alive
+        assert mine.name.startswith(f".fit.nc.{_host()}.{os.getpid()}-") and mine.name.endswith(".tmp")
+        assert Path(temp_file(group / "fit.nc")) != mine  # unique per write
+        stale = group / f".fit.nc.{_host()}.{dead.pid}-abc123.tmp"
+        running = group / f".fit.nc.{_host()}.{live.pid}-abc123.tmp"
+        elsewhere = group / f".fit.nc.otherhost.{dead.pid}-abc123.tmp"
+        foreign = group / "notes.tmp"
+        for p in (stale, running, elsewhere, foreign):
+            p.write_text("partial")
+        assert remove_stale_temps(tmp_path) == [stale]
+        assert all(p.exists() for p in (mine, running, elsewhere, foreign)) and not stale.exists()
+    finally:
+        live.kill()
+        live.wait()
+
+
+def test_class2_lock_names_the_pid_holding_the_folder(tmp_path):
+    from skinfit.checkpoint import CheckpointLock
+
+    code = ("import sys, time; from skinfit.checkpoint import CheckpointLock\n"
+            f"with CheckpointLock({str(tmp_path / 'checkpoint.h5')!r}):\n"
+            "    print('held', flush=True); time.sleep(60)\n")
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(InputError, match=rf"^{tmp_path}: is in use by pid {holder.pid} \(lock "):
+            with CheckpointLock(tmp_path / "checkpoint.h5"):
+                pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with CheckpointLock(tmp_path / "checkpoint.h5"):  # released by the kernel when its holder died
+        pass

@@ -253,6 +253,67 @@ def test_damaged_campaign_file_gives_input_error(doc):
         _load_ok_or_input_error(lambda: load_campaign(_write(tmp, "c.toml", dumps(doc))))
 
 
+# ---- issue 21: group labels and ids with path syntax (classes 2 and 4) ----------------------
+# Strategy size: a label or id is 0-24 characters, each drawn half from path syntax ("/", "\\",
+# ".", "..", "~", " ", "=", ",", "_", "-", "A", "a") and half from any Unicode character but
+# surrogates and NUL; 200 examples of lists of 1-8 distinct labels; 60 examples of one dataset id
+# (a third plain names of 1-16 characters) with 1-4 such subject labels (CSV-safe).
+PATH_BITS = st.sampled_from(["/", "\\", ".", "..", "~", " ", "=", ",", "_", "-", "A", "a"])
+odd_text = st.lists(st.one_of(PATH_BITS, st.characters(blacklist_categories=["Cs"], blacklist_characters="\0")),
+                    max_size=24).map("".join)
+
+
+@settings(max_examples=200, deadline=None)
+@given(labels=st.lists(odd_text, min_size=1, max_size=8, unique=True))
+def test_class2_group_folders_distinct_names_inside_out(labels):
+    from skinfit.groups import NAME, group_dir, inside
+
+    names = [group_dir(x) for x in labels]
+    assert len({n.casefold() for n in names}) == len(labels)  # distinct even on a case-insensitive disk
+    out = Path(tempfile.gettempdir()) / "out"
+    for n in names:
+        assert NAME.match(n) and len(n.encode()) <= 70
+        inside(out, out / n / "fit.nc")
+
+
+csv_safe = odd_text.filter(lambda t: t.strip() and not set(t) & set(',"\r\n\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029'))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data_id=st.one_of(odd_text, st.sampled_from(["../../x", "/tmp/x", "a/b", "..", ".", "~", "x/../../y"]),
+                        st.from_regex(r"\A[A-Za-z0-9][A-Za-z0-9._-]{0,15}\Z")),
+       subjects=st.lists(csv_safe, min_size=1, max_size=4, unique=True))
+def test_class4_campaign_ids_with_path_syntax_refused_or_kept_inside_out(data_id, subjects):
+    """An id that is not a plain name is refused at load time; otherwise every result path,
+    whatever the group labels, is a distinct path under ``out``."""
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "d"
+        folder.mkdir()
+        card = (DATA_DIR / "dataset.toml").read_text()
+        card = "\n".join(f"id = {json.dumps(data_id, ensure_ascii=False)}" if line.startswith("id =") else line
+                         for line in card.splitlines())
+        (folder / "dataset.toml").write_text(card)
+        rows = (DATA_DIR / "data.csv").read_text().splitlines()
+        header = rows[0].split(",")
+        col = header.index("subject")
+        body = []
+        for i, line in enumerate(rows[1:]):
+            cells = line.split(",")
+            cells[col] = subjects[i % len(subjects)]
+            body.append(",".join(cells))
+        (folder / "data.csv").write_text("\n".join([rows[0], *body]) + "\n")
+        path = Path(tmp) / "c.toml"
+        path.write_text(dumps(CAMPAIGN_DOC | {"datasets": [str(folder)], "by": ["subject"], "out": "o/out"}))
+        try:
+            campaign = load_campaign(path)
+        except InputError:
+            return
+        paths = [Path(t["path"]) for t in campaign.tasks]
+        assert len(set(paths)) == len(paths) == len({t["group"] for t in campaign.tasks})
+        out = (Path(tmp) / "o" / "out").resolve()
+        assert all(p.resolve().is_relative_to(out) for p in paths)
+
+
 # ---- priors refused before sampling (issue 6) -----------------------------------------------
 @pytest.mark.parametrize("spec, match", [
     ('dist = "uniform"\nbounds = [0.0, inf]', "improper"),

@@ -64,3 +64,136 @@ def test_group_labels_and_errors(tmp_path):
         group_labels(ds, "finger")
     assert main(["fit", "electroadhesion_coulomb", "electroadhesion_synthetic", "--by", "finger",
                  "--out", str(tmp_path)]) == 2
+
+
+# ---- issue 21, class 2: results lost or mixed up; class 4: writes outside the output folder --------
+ODD = {"a/b": 0.3, "a b": 0.5, "a_b": 0.7}  # one folder name under the old slug (a_b)
+
+
+def _files(folder):
+    return {p for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def odd_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("odd")
+    data, _ = write_population(folder, truths=ODD, rows=6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        fit_by("electroadhesion_coulomb", data, "subject", folder / "run", seed=4, ess_target=100)
+    return folder, data
+
+
+def test_class2_labels_differing_in_odd_characters_get_their_own_folders_and_fits(odd_run):
+    folder, data = odd_run
+    fits = load_groups(folder / "run")
+    assert sorted(fits) == sorted(f"subject={s}" for s in ODD)
+    assert len({p.parent for p in (folder / "run").glob("*/fit.nc")}) == 3
+    rows = {}
+    for line in (data / "data.csv").read_text().splitlines()[1:]:
+        subject, _, _, ft = line.split(",")
+        rows.setdefault(subject, []).append(float(ft) * 1e-3)
+    for label, fit in fits.items():
+        subject = label.split("=", 1)[1]
+        assert fit.attrs["group"] == label
+        # each fit was made from its own group's rows, read here from the CSV itself
+        np.testing.assert_allclose(fit.idata["observed_data"]["tangential_force"].values, rows[subject], rtol=1e-12)
+
+
+def test_class2_load_groups_refuses_a_fit_filed_under_another_label(odd_run, tmp_path):
+    import shutil
+
+    folder, _ = odd_run
+    run = tmp_path / "run"
+    shutil.copytree(folder / "run", run)
+    index = json.loads((run / "index.json").read_text())
+    a, b = (run / g["path"] for g in index["groups"][:2])
+    a.rename(tmp_path / "swap.nc")
+    b.rename(a)
+    (tmp_path / "swap.nc").rename(b)
+    with pytest.raises(skinfit.InputError,
+                       match=r"listed for group 'subject=a/b'.*holds the fit of group 'subject=a b'"):
+        load_groups(run)
+
+
+def test_class1_load_groups_warns_when_the_data_changed_since(odd_run, tmp_path):
+    import shutil
+
+    folder, data = odd_run
+    shutil.copytree(folder, tmp_path / "copy")
+    index = json.loads((tmp_path / "copy" / "run" / "index.json").read_text())
+    index["dataset_path"] = str(tmp_path / "copy" / data.name / "dataset.toml")
+    (tmp_path / "copy" / "run" / "index.json").write_text(json.dumps(index))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # unchanged data: no warning
+        assert len(load_groups(tmp_path / "copy" / "run")) == 3
+    csv = tmp_path / "copy" / data.name / "data.csv"
+    csv.write_text(csv.read_text().replace("a b,", "a c,"))
+    with pytest.warns(UserWarning, match=r"the fits were made from .* with sha256 .*which now has"):
+        load_groups(tmp_path / "copy" / "run")
+
+
+def test_group_dir_is_a_name_distinct_per_exact_label():
+    from skinfit.groups import NAME, group_dir
+
+    labels = ["a/b", "a b", "a_b", "A_B", "a=b", "a-b", "..", "../../x", "/etc/passwd", "", "é", "e"]
+    names = [group_dir(x) for x in labels]
+    assert len(set(names)) == len(labels) and len({n.lower() for n in names}) == len(labels)
+    assert all(NAME.match(n) and len(n) <= 70 for n in names)
+    assert group_dir("subject=S01").startswith("subject-S01-")
+
+
+def test_class2_by_run_refuses_an_out_in_use(tmp_path, capsys):
+    import os
+
+    from skinfit.checkpoint import CheckpointLock
+
+    path, _ = write_population(tmp_path, n_subjects=1)
+    out = tmp_path / "run"
+    with CheckpointLock(out / "checkpoint.h5"):  # what a plain `skinfit fit --out run` holds
+        code = main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(out), "--quiet"])
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"skinfit: error: {out}: is in use by pid {os.getpid()} (lock .checkpoint.h5.lock); "
+                   "wait for it to finish or use another --out")
+    assert not (out / "index.json").exists()
+
+
+def test_class2_strict_by_run_exits_3_when_a_group_warned(tmp_path):
+    path, _ = write_population(tmp_path, n_subjects=1)
+    argv = ["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--quiet", "--ess", "400",
+            "--max-steps", "40", "--seed", "1"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        assert main(argv + ["--out", str(tmp_path / "a")]) == 0
+        assert main(argv + ["--out", str(tmp_path / "b"), "--strict"]) == 3
+    index = json.loads((tmp_path / "b" / "index.json").read_text())
+    assert [g["converged"] for g in index["groups"]] == [False]  # the result is kept
+
+
+def test_class4_group_labels_with_path_syntax_stay_inside_out(tmp_path):
+    path, _ = write_population(tmp_path, truths={"../../x": 0.4, "/abs": 0.6}, rows=6)
+    before = _files(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        fit_by("electroadhesion_coulomb", path, "subject", tmp_path / "deep" / "run", seed=2, ess_target=100)
+    new = _files(tmp_path) - before
+    assert new and all(p.is_relative_to(tmp_path / "deep" / "run") for p in new)
+    assert sorted(load_groups(tmp_path / "deep" / "run")) == ["subject=../../x", "subject=/abs"]
+
+
+def test_class1_report_check_names_fits_whose_data_changed(odd_run):
+    from skinfit.groups import data_drift
+
+    folder, data = odd_run
+    fits = load_groups(folder / "run")
+    items = [(label, f) for label, f in fits.items()]
+    assert data_drift(items) == []  # the data are as fitted
+    csv = data / "data.csv"
+    original = csv.read_text()
+    try:
+        csv.write_text(original.replace("a b,", "a c,"))
+        messages = data_drift(items)
+    finally:
+        csv.write_text(original)
+    assert len(messages) == 3 and all("which now has" in m and "not of the current data" in m for m in messages)
