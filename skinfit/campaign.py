@@ -51,6 +51,7 @@ import multiprocessing
 import os
 import resource
 import socket
+import sys
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -330,8 +331,10 @@ def _collect(future, i, finish):
 
 
 def _run_dask(campaign, todo, scheduler, workers, finish):
-    from distributed import Client, LocalCluster
-    from distributed import as_completed as dask_completed
+    from .errors import require_optional
+
+    distributed = require_optional("distributed", "dask")
+    Client, LocalCluster, dask_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
 
     cluster = None
     if scheduler == "local":
@@ -373,10 +376,16 @@ def cli_campaign(args):
     """``skinfit campaign``: run a campaign file and print its index."""
     t0 = time.perf_counter()
     campaign = load_campaign(args.campaign)
-    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers)
+    as_json = getattr(args, "json", False)
+    echo = (lambda *a, **k: print(*a, **k, file=sys.stderr)) if as_json else print
+    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers, echo=echo)
+    failed = ~table["status"].isin(["done", "complete"])
+    if as_json:
+        print(json.dumps({"index": str(campaign.out / "index.csv"), "failed": int(failed.sum()),
+                          "fits": json.loads(table.to_json(orient="records"))}, indent=2))
+        return 1 if failed.any() else 0
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
         print(table.drop(columns=["path", "worker"]).to_string(index=False))
-    failed = ~table["status"].isin(["done", "complete"])
     unconverged = sum(c is False for c in table["converged"])
     print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
           f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")

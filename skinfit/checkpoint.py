@@ -276,6 +276,14 @@ def _emcee_version():
     return emcee.__version__
 
 
+def user_file_mode():
+    """The mode a plain ``open(path, "w")`` would give a new file: 0o666 less the umask
+    (``tempfile.mkstemp`` creates 0o600 files; results are chmod-ed to this before the rename)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def write_atomic(path, build):
     """Create ``path`` as an HDF5 file filled by ``build(h5py.File)``: all or nothing.
 
@@ -295,6 +303,7 @@ def write_atomic(path, build):
             os.fsync(fd)
         finally:
             os.close(fd)
+        os.chmod(tmp, user_file_mode())
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     finally:

@@ -13,7 +13,7 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ._toml import ROOT, available, find_file, read_toml, require
+from ._toml import available, find_file, read_toml, require
 from .errors import InputError
 from .models import _display
 from .units import NONNEGATIVE, UNITS, dimension, to_si
@@ -243,6 +243,3 @@ def read_table(raw, columns, where):
 def list_datasets():
     return sorted(available("datasets"))
 
-
-def dataset_root():
-    return Path(ROOT) / "datasets"

@@ -113,6 +113,13 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     model = model if isinstance(model, Model) else load_model(model)
     dataset = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    seed_drawn = rng is None
+    if seed_drawn and resume and checkpoint is not None and Path(checkpoint).exists():
+        from .checkpoint import load_checkpoint
+
+        rng = load_checkpoint(checkpoint).meta.get("seed")  # the seed drawn by the interrupted run
+    if rng is None:  # no seed given: draw one and record it, so the fit can be repeated exactly
+        rng = int(np.random.SeedSequence().entropy % 2**63)
     seed = rng if isinstance(rng, (int, np.integer)) else None
     rng = as_generator(rng)
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
@@ -149,6 +156,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         warnings.warn(msg, ConvergenceWarning, stacklevel=2)
     t_tree = time.perf_counter()
     idata, deferred = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
+    idata.attrs["seed_drawn"] = int(seed_drawn)
     now = time.perf_counter()
     idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds,
                                          "start_s": t_start_s if saved is None else 0.0,
@@ -473,7 +481,11 @@ class Fit:
         s = self.attr("sampler")
         t = self.attr("timings")
         c = self.attr("support_counts")
+        seed = int(self.attrs.get("seed", -1))
+        seed_text = ("a numpy Generator (not recorded)" if seed < 0 else
+                     f"{seed}{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
         lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.attrs['dataset_sha256'][:12]})",
+                 f"seed: {seed_text}",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
@@ -505,6 +517,9 @@ class Fit:
             self.idata.to_netcdf(tmp, engine="h5netcdf")
             with open(tmp, "rb") as f:
                 os.fsync(f.fileno())
+            from .checkpoint import user_file_mode
+
+            os.chmod(tmp, user_file_mode())  # mkstemp's 0600 -> what the user's umask gives
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):

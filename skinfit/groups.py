@@ -128,4 +128,7 @@ def _write_json(path, doc):
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".json.tmp")
     with os.fdopen(fd, "w") as fh:
         json.dump(doc, fh, indent=1, default=str)
+    from .checkpoint import user_file_mode
+
+    os.chmod(tmp, user_file_mode())  # mkstemp's 0600 -> what the user's umask gives
     os.replace(tmp, path)

@@ -13,7 +13,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ._toml import ROOT, available, find_file, read_toml, require, sha256_file
+from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError, SupportWarning
 
 __all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "NOISE_MODELS"]
@@ -317,10 +317,9 @@ def _derived_table(doc, where):
 
 
 def _display(path):
-    try:
-        return str(path.resolve().relative_to(ROOT))
-    except ValueError:
-        return str(path)
+    from .paths import display
+
+    return display(path)
 
 
 def list_models():

@@ -449,5 +449,10 @@ def cli_report(args):
     items = _as_fits(fits)
     comparison = _comparisons(items)
     index = write_report(dict(items), args.out, comparison=comparison)
+    if getattr(args, "json", False):
+        import json
+
+        print(json.dumps({"report": str(index), "fits": [name for name, _ in items]}, indent=2))
+        return 0
     print(f"report written: {index}  (open it in a browser; summary.md and CSV tables beside it)")
     return 0
