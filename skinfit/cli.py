@@ -48,11 +48,12 @@ class _NothingFound(Exception):
 
 def _cmd_models(args):
     from .models import load_model
+    from .references import cite
 
     rows = []
     for mid, entry in _where("models", args).items():
         m = load_model(str(entry.path))
-        rows.append({"id": m.id, **_origin(entry), "title": m.title, "source": m.source,
+        rows.append({"id": m.id, **_origin(entry), "title": m.title, "source": m.source, "cited": cite(m.source),
                      "observables": [f"{o.name} [{o.unit}]" for o in m.observables],
                      "covariates": [f"{c.name} [{c.unit}]" for c in m.covariates],
                      "parameters": [f"{p.name} [{p.unit}]" for p in m.parameters],
@@ -60,7 +61,7 @@ def _cmd_models(args):
     if args.json:
         return print(json.dumps(rows, indent=2))
     for r in rows:
-        print(f"{r['id']}: {r['title']}{_from_line(r, args)}\n  source: {r['source']}"
+        print(f"{r['id']}: {r['title']}{_from_line(r, args)}\n  source: {r['cited']}"
               f"\n  observes: {', '.join(r['observables'])}"
               f"\n  covariates: {', '.join(r['covariates'])}\n  parameters: {', '.join(r['parameters'])}"
               + (f"\n  competes with: {', '.join(r['variants'])}" if r["variants"] else "") + "\n")
@@ -85,13 +86,15 @@ def _cmd_priors(args):
         units = {p.name: p.unit for p in m.parameters}
     except InputError:
         pass
+    from .references import cite
+
     rows = [{"parameter": n, "unit": units.get(n, "(noise, observable's unit)"), "prior": p.describe(),
-             "source": p.source} for n, p in priors.priors.items()]
+             "source": p.source, "cited": cite(p.source)} for n, p in priors.priors.items()]
     if args.json:
         return print(json.dumps(rows, indent=2))
     print(f"priors for {priors.model} ({priors.path}), SI units, each truncated to its bounds:\n")
     for r in rows:
-        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['source']}")
+        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['cited']}")
 
 
 def _cmd_datasets(args):

@@ -40,7 +40,7 @@ class Column:
 class Dataset:
     """A validated dataset: a tidy frame in SI units plus its card.
 
-    ``frame`` columns carry the skinfit names (MODELS.md); quantities are float64 in SI,
+    ``frame`` columns carry the skinfit names (docs/models/); quantities are float64 in SI,
     categories are strings.  ``units`` gives, per column, the unit the data came in.
     """
 

@@ -214,7 +214,14 @@ def load_model(name):
 
 def _parse_model(path, digest):
     _, text = read_toml(path)
-    return _parse_model_text(text, _display(path), digest)
+    model = _parse_model_text(text, _display(path), digest)
+    from .references import check_source
+
+    check_source(model.source, model.path, "source")  # keys into references.toml
+    for cname, source in model.constant_sources.items():
+        if source:
+            check_source(source, model.path, f"constants.{cname}.source")
+    return model
 
 
 def _parse_model_text(text, where, digest):

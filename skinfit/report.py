@@ -163,7 +163,7 @@ def _provenance(fit):
     dprov = json.loads(attrs.get("dataset_provenance", "{}"))
     created = fit.group("posterior").attrs.get("created_at", "")
     return {"model_id": attrs["model_id"], "model_sha": attrs["model_sha256"], "model_title": card.get("title", ""),
-            "model_source": card.get("source", ""), "priors_id": attrs["priors_id"],
+            "model_source": _cited(card.get("source", "")), "priors_id": attrs["priors_id"],
             "priors_sha": attrs["priors_sha256"], "dataset_id": attrs["dataset_id"],
             "dataset_sha": attrs["dataset_sha256"], "dataset_path": attrs.get("dataset_path", ""),
             "dataset_kind": dprov.get("kind", "unknown"), "skinfit": versions.get("skinfit", "unknown"),
@@ -439,6 +439,13 @@ def _comparisons(fits):
     if not tables:
         return None
     return next(iter(tables.values())) if len(tables) == 1 else tables
+
+
+def _cited(source):
+    """A card's source with each reference key spelled out (authors, title, venue, year)."""
+    from .references import cite_long
+
+    return cite_long(source)
 
 
 def cli_report(args):
