@@ -76,3 +76,10 @@ def test_cite_spells_out_keys_and_keeps_locators():
     assert parse_source("fujii_wavy, Section 6.2: n = -0.3; more on it; dzidek2017: E ~ 40 kPa") == [
         ("fujii_wavy", "Section 6.2: n = -0.3; more on it"), ("dzidek2017", "E ~ 40 kPa")]
     assert cite("fujii_wavy, eq. 13; dzidek2017") == "Fujii, Okamoto & Yamada, eq. 13; Dzidek et al. 2017"
+
+
+@pytest.mark.parametrize("path", sorted(ROOT.glob("models/*.toml")), ids=lambda p: p.stem)
+def test_every_card_links_to_its_model_documentation(path):
+    m = re.search(r"docs/models/[a-z_]+\.md", path.read_text())
+    assert m and (ROOT / m.group(0)).is_file(), path.name
+    assert path.stem in (ROOT / m.group(0)).read_text() or path.stem in (ROOT / "docs/models/index.md").read_text()
