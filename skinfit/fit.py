@@ -82,9 +82,8 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         Minimum effective sample size per parameter to call the run converged.
     n_global, n_local : int
         MAP search: prior draws scored in one vectorised call, then SLSQP from the ``n_local``
-        best of them and a BOBYQA polish (:func:`~skinfit.optimize.find_map`; 0.05-0.4 s on
-        the shipped posteriors; 4 starts found the wavy two-point model's
-        best optimum in 5 of 5 seeds where 2 found it in 2 of 3).
+        best of them and a BOBYQA polish (:func:`~skinfit.optimize.find_map`; measurements in
+        docs/design/sampling.md).
     strict : bool
         Raise instead of warn when the run does not meet its convergence criteria.
     checkpoint : path-like, optional
@@ -525,6 +524,23 @@ class Fit:
             if os.path.exists(tmp):
                 os.unlink(tmp)
         return path
+
+    def _repr_html_(self) -> str:
+        """Notebook view: model and data, the seed, the convergence verdict with its reasons,
+        the guard-rail warnings and the summary table."""
+        from html import escape
+
+        s = self.attr("sampler")
+        verdict = ("<b style='color:#1a7f37'>converged</b>" if s["converged"] else
+                   "<b style='color:#cf222e'>NOT converged</b>: " + escape("; ".join(s["reasons"])))
+        items = "".join(f"<li><b>{escape(w['status'])}</b> {escape(w['message'])}</li>" for w in self.warnings)
+        seed = int(self.attrs.get("seed", -1))
+        with pd.option_context("display.float_format", "{:.4g}".format):
+            table = self.summary().to_html(float_format="{:.4g}".format, border=0)
+        return (f"<div><p><b>{escape(self.model_id)}</b> on <b>{escape(self.dataset_id)}</b> "
+                f"(data {escape(self.attrs['dataset_sha256'][:12])}; seed {seed if seed >= 0 else 'not recorded'})"
+                f"<br>{verdict}; walkers {s['nwalkers']}, steps {s['n_steps']}, max R-hat {s['rhat_max']:.4f}</p>"
+                + (f"<ul>{items}</ul>" if items else "") + table + "</div>")
 
     def __repr__(self):
         return f"Fit({self.model_id!r} on {self.dataset_id!r}, converged={self.converged})"

@@ -229,3 +229,15 @@ def test_wheel_carries_the_shipped_files(tmp_path):
             card = f"skinfit/_shipped/{kind}/{i}/dataset.toml" if kind == "datasets" else f"skinfit/_shipped/{kind}/{i}.toml"
             assert card in names
     assert "skinfit/py.typed" in names and "skinfit/references.toml" in names
+
+
+def test_fit_html_view_shows_verdict_warnings_and_summary(seeded_run):
+    out, _, _ = seeded_run
+    fit = skinfit.load_fit(out / "fit.nc")
+    html = fit._repr_html_()
+    assert ("converged</b>" in html) and (("NOT converged" in html) != fit.converged)
+    for name in fit.summary().index:
+        assert f"<th>{name}</th>" in html
+    for w in fit.warnings:
+        assert w["status"] in html
+    assert f"seed {int(fit.attrs['seed'])}" in html
