@@ -241,3 +241,13 @@ def test_fit_html_view_shows_verdict_warnings_and_summary(seeded_run):
     for w in fit.warnings:
         assert w["status"] in html
     assert f"seed {int(fit.attrs['seed'])}" in html
+
+
+def test_report_json_names_the_report_and_its_fits(tmp_path, seeded_run, capsys):
+    out, _, _ = seeded_run
+    assert main(["report", str(out / "fit.nc"), "--out", str(tmp_path / "rep"), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert Path(doc["report"]) == tmp_path / "rep" / "index.html" and Path(doc["report"]).is_file()
+    assert len(doc["fits"]) == 1
+    html = Path(doc["report"]).read_text()
+    assert "Fujii" not in html and "Modeling Sliding Friction Between Human Finger and Touchscreen" in html

@@ -47,7 +47,7 @@ def test_area_is_gamma_times_impedance_to_the_p(subject):
 
 
 def test_p_falls_with_actuation_force_for_every_subject():
-    """Seed 003 Fig. 6c: the exponent p decreases with f_a (m falls and n_z rises with f_a)."""
+    """Huloux, Willemet & Wiertlewski, Fig. 6c: the exponent p decreases with f_a (m falls and n_z rises with f_a)."""
     fa = np.arange(0.0, 31.0, 5.0)
     for s in SUBJECTS.values():
         p = derived(_ens(s), {"actuation_force": fa}, {})["p"][0]

@@ -29,7 +29,7 @@ def test_make_regenerates_data_byte_for_byte(tmp_path):
 
 
 def test_design_is_the_papers():
-    """Seed 004: 20-140 mm/s in steps of 20 (Section III.B); 0, 0.8, 1, 1.2, 1.4, 1.6 um p-p at
+    """Torres et al.: 20-140 mm/s in steps of 20 (Section III.B); 0, 0.8, 1, 1.2, 1.4, 1.6 um p-p at
     58 kHz (Section III.C); finger motion along x and y; 8 participants. Lab units converted."""
     ds = skinfit.load_dataset("ultrasonic_synthetic")
     f = ds.frame
