@@ -251,3 +251,12 @@ def test_report_json_names_the_report_and_its_fits(tmp_path, seeded_run, capsys)
     assert len(doc["fits"]) == 1
     html = Path(doc["report"]).read_text()
     assert "Fujii" not in html and "Modeling Sliding Friction Between Human Finger and Touchscreen" in html
+
+
+def test_compare_without_dynesty_says_which_extra_to_install(tmp_path, seeded_run, capsys, monkeypatch):
+    out, _, _ = seeded_run
+    monkeypatch.setitem(sys.modules, "dynesty", None)  # import fails as if not installed
+    code = main(["compare", str(out / "fit.nc"), str(out / "fit.nc"), "--method", "nested"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.strip() == "skinfit: error: dynesty is not installed: install skinfit[nested] (pip install 'skinfit[nested]')"
