@@ -10,7 +10,7 @@ export MPLBACKEND=Agg UV_SYSTEM_CERTS=1
 PY=$(bash scripts/find_python.sh)
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
-.venv/bin/python -m pip install --quiet "uv>=0.5"
+.venv/bin/python -m pip install --quiet "uv>=0.13.9"  # UV_SYSTEM_CERTS: the system CA store
 UV=.venv/bin/uv
 
 echo "== lowest direct versions =="
