@@ -207,7 +207,7 @@ def _textured_surface(post):
 
 # ---- contact_area --------------------------------------------------------------------------
 def _contact_area(post):
-    """Two log-normal observables; log-predictions linear in the parameters (eqs. 3-4 of seed 003)."""
+    """Two log-normal observables; log-predictions linear in the parameters (eqs. 3-4 of Huloux, Willemet & Wiertlewski)."""
     _expect(post, ("alpha_a0", "alpha_a1", "m0", "m1", "beta_z0", "beta_z1", "n_z0", "n_z1",
                    "sigma_contact_area", "sigma_impedance"),
             ["log", "identity", "log", "identity", "log", "identity", "log", "identity", "log", "log"],

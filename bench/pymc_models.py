@@ -83,7 +83,7 @@ def _electroadhesion(p, x, c):
 
 
 def _textured_surface(p, x, c):
-    """skinfit.physics.textured.textured_surface (analytic Hertz reading of seed 002)."""
+    """skinfit.physics.textured.textured_surface (analytic Hertz reading of the Biotribology 2019 paper)."""
     import pytensor.tensor as pt
 
     f = x["normal_force"]

@@ -1,16 +1,14 @@
 """Reading the TOML files a researcher edits (model cards, prior files, dataset cards)."""
 
 import hashlib
-import os
 import tomllib
 from pathlib import Path
 
 from .errors import InputError
+from .paths import entries, locate
 
-__all__ = ["ROOT", "read_toml", "sha256_file", "require", "find_file"]
+__all__ = ["read_toml", "sha256_file", "require", "find_file"]
 
-#: Directory holding models/, priors/ and datasets/ (the repository, or $SKINFIT_HOME).
-ROOT = Path(os.environ.get("SKINFIT_HOME", Path(__file__).resolve().parents[1]))
 
 
 def sha256_file(path):
@@ -59,29 +57,9 @@ def _kind_name(kind):
 
 
 def find_file(kind, name, suffix=".toml"):
-    """Resolve ``name`` as a path, or as an id under ROOT/<kind>/."""
-    p = Path(name)
-    if p.suffix == suffix and p.exists():
-        return p
-    if p.is_dir() and (p / "dataset.toml").exists():
-        return p / "dataset.toml"
-    candidate = ROOT / kind / (name + suffix) if suffix else ROOT / kind / name
-    if kind == "datasets":
-        candidate = ROOT / kind / name / "dataset.toml"
-    if candidate.exists():
-        return candidate
-    known = sorted(available(kind))
-    if not (ROOT / kind).is_dir():  # e.g. a non-editable install: the shipped cards stay in the checkout
-        raise InputError(name, f"no such {kind[:-1]}: there is no {ROOT / kind} with the shipped {kind} "
-                               "(skinfit reads them from the checkout it is installed from: install it with "
-                               "`pip install -e <checkout>`, or set SKINFIT_HOME to the checkout)")
-    raise InputError(name, f"no such {kind[:-1]} (known: {', '.join(known) or 'none'})")
+    """Resolve ``name`` as a path, or as an id on the search path (skinfit.paths)."""
+    return locate(kind, name)
 
 
 def available(kind):
-    base = ROOT / kind
-    if not base.exists():
-        return []
-    if kind == "datasets":
-        return [d.name for d in base.iterdir() if (d / "dataset.toml").exists()]
-    return [f.stem for f in base.glob("*.toml")]
+    return list(entries(kind))

@@ -65,6 +65,7 @@ import os
 import resource
 import socket
 import threading
+import sys
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -74,7 +75,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ._toml import ROOT, find_file, read_toml, require
+from ._toml import find_file, read_toml, require
 from .checkpoint import CheckpointLock, remove_stale_temps, temp_file
 from .data import load_dataset
 from .errors import ConvergenceWarning, InputError
@@ -116,7 +117,7 @@ def _resolve(name, base):
 def _card(kind, ref):
     """The absolute path of the card a reference loads (a path as given, or the shipped id's)."""
     card = find_file(kind, ref)
-    return str((card if card.is_absolute() or card.exists() else ROOT / card).resolve())
+    return str(Path(card).resolve())
 
 
 def _unique_id(seen, obj_id, entry, kind, where, card):
@@ -404,8 +405,10 @@ def _collect(future, i, finish):
 
 
 def _run_dask(campaign, todo, scheduler, workers, finish):
-    from distributed import Client, LocalCluster
-    from distributed import as_completed as dask_completed
+    from .errors import require_optional
+
+    distributed = require_optional("distributed", "dask")
+    Client, LocalCluster, dask_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
 
     cluster = None
     if scheduler == "local":
@@ -475,10 +478,16 @@ def cli_campaign(args):
     """``skinfit campaign``: run a campaign file and print its index."""
     t0 = time.perf_counter()
     campaign = load_campaign(args.campaign)
-    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers)
+    as_json = getattr(args, "json", False)
+    echo = (lambda *a, **k: print(*a, **k, file=sys.stderr)) if as_json else print
+    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers, echo=echo)
+    failed = ~table["status"].isin(["done", "complete"])
+    if as_json:
+        print(json.dumps({"index": str(campaign.out / "index.csv"), "failed": int(failed.sum()),
+                          "fits": json.loads(table.to_json(orient="records"))}, indent=2))
+        return 1 if failed.any() else 0
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
         print(table.drop(columns=["path", "worker", "dataset_path", "dataset_sha256"]).to_string(index=False))
-    failed = ~table["status"].isin(["done", "complete"])
     unconverged = sum(c is False for c in table["converged"])
     print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
           f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")

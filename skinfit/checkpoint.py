@@ -278,6 +278,14 @@ def _emcee_version():
     return emcee.__version__
 
 
+def user_file_mode():
+    """The mode a plain ``open(path, "w")`` would give a new file: 0o666 less the umask
+    (``tempfile.mkstemp`` creates 0o600 files; :func:`temp_file` gives its files this mode)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def write_atomic(path, build):
     """Create ``path`` as an HDF5 file filled by ``build(h5py.File)``: all or nothing.
 
@@ -334,6 +342,7 @@ def temp_file(path):
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{_host()}.{os.getpid()}-", suffix=".tmp")
     os.close(fd)
+    os.chmod(tmp, user_file_mode())  # mkstemp's 0600 -> what a plain open() under the user's umask gives
     return tmp
 
 

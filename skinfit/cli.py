@@ -2,23 +2,58 @@
 
 import argparse
 import json
+import os
 import sys
 import time
 import warnings
 from pathlib import Path
 
-from .errors import InputError
+from .errors import InputError, MissingDependency
 
 __all__ = ["main"]
 
 
+def _where(kind, args):
+    """Search-path entries of ``kind`` (id -> Entry); none found: say where it looked, exit 1."""
+    from .paths import entries, search_path
+
+    found = entries(kind)
+    if not found:
+        looked = "\n".join(f"  {r.path / kind}  ({r.origin})" for r in search_path())
+        raise _NothingFound(f"skinfit: no {kind} found; searched:\n{looked}\n"
+                            f"(add folders with --path DIR or ${'SKINFIT_PATH'}; see `skinfit --help`)")
+    if getattr(args, "verbose", False) and not args.json:
+        print("search path (first match wins):")
+        for r in search_path():
+            print(f"  {r.path / kind}  ({r.origin})")
+        print()
+    return found
+
+
+def _origin(entry):
+    return {"path": str(entry.path), "origin": entry.root.origin,
+            "shadows": [str(r.path) for r in entry.shadows]}
+
+
+def _from_line(row, args):
+    if not getattr(args, "verbose", False):
+        return ""
+    shadow = f"; shadows {', '.join(row['shadows'])}" if row["shadows"] else ""
+    return f"\n  from: {row['path']} ({row['origin']}{shadow})"
+
+
+class _NothingFound(Exception):
+    """A listing command found nothing: message printed, exit status 1."""
+
+
 def _cmd_models(args):
-    from .models import list_models, load_model
+    from .models import load_model
+    from .references import cite
 
     rows = []
-    for mid in list_models():
-        m = load_model(mid)
-        rows.append({"id": m.id, "title": m.title, "source": m.source,
+    for mid, entry in _where("models", args).items():
+        m = load_model(str(entry.path))
+        rows.append({"id": m.id, **_origin(entry), "title": m.title, "source": m.source, "cited": cite(m.source),
                      "observables": [f"{o.name} [{o.unit}]" for o in m.observables],
                      "covariates": [f"{c.name} [{c.unit}]" for c in m.covariates],
                      "parameters": [f"{p.name} [{p.unit}]" for p in m.parameters],
@@ -26,7 +61,8 @@ def _cmd_models(args):
     if args.json:
         return print(json.dumps(rows, indent=2))
     for r in rows:
-        print(f"{r['id']}: {r['title']}\n  source: {r['source']}\n  observes: {', '.join(r['observables'])}"
+        print(f"{r['id']}: {r['title']}{_from_line(r, args)}\n  source: {r['cited']}"
+              f"\n  observes: {', '.join(r['observables'])}"
               f"\n  covariates: {', '.join(r['covariates'])}\n  parameters: {', '.join(r['parameters'])}"
               + (f"\n  competes with: {', '.join(r['variants'])}" if r["variants"] else "") + "\n")
 
@@ -35,6 +71,14 @@ def _cmd_priors(args):
     from .models import load_model
     from .priors import load_priors
 
+    if args.model is None:  # list the prior files on the search path
+        rows = [{"id": pid, **_origin(e), "model": load_priors(str(e.path)).model}
+                for pid, e in _where("priors", args).items()]
+        if args.json:
+            return print(json.dumps(rows, indent=2))
+        for r in rows:
+            print(f"{r['id']} (for model {r['model']}){_from_line(r, args)}")
+        return 0
     priors = load_priors(args.model)
     units = {}
     try:
@@ -42,29 +86,32 @@ def _cmd_priors(args):
         units = {p.name: p.unit for p in m.parameters}
     except InputError:
         pass
+    from .references import cite
+
     rows = [{"parameter": n, "unit": units.get(n, "(noise, observable's unit)"), "prior": p.describe(),
-             "source": p.source} for n, p in priors.priors.items()]
+             "source": p.source, "cited": cite(p.source)} for n, p in priors.priors.items()]
     if args.json:
         return print(json.dumps(rows, indent=2))
     print(f"priors for {priors.model} ({priors.path}), SI units, each truncated to its bounds:\n")
     for r in rows:
-        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['source']}")
+        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['cited']}")
 
 
 def _cmd_datasets(args):
-    from .data import list_datasets, load_dataset
+    from .data import load_dataset
 
     rows = []
-    for did in list_datasets():
-        ds = load_dataset(did)
-        rows.append({"id": ds.id, "title": ds.title, "rows": len(ds), "model": ds.model,
+    for did, entry in _where("datasets", args).items():
+        ds = load_dataset(str(entry.path.parent))
+        rows.append({"id": ds.id, **_origin(entry), "title": ds.title, "rows": len(ds), "model": ds.model,
                      "provenance": ds.provenance.get("kind"), "groups": list(ds.groups),
                      "columns": {c.name: c.unit or "category" for c in ds.columns}})
     if args.json:
         return print(json.dumps(rows, indent=2))
     for r in rows:
         cols = ", ".join(f"{k} [{v}]" for k, v in r["columns"].items())
-        print(f"{r['id']} ({r['provenance']}, {r['rows']} rows, for {r['model']}): {r['title']}\n"
+        print(f"{r['id']} ({r['provenance']}, {r['rows']} rows, for {r['model']}): {r['title']}"
+              f"{_from_line(r, args)}\n"
               f"  columns (units as stored; converted to SI on load): {cols}\n")
 
 
@@ -92,7 +139,10 @@ def _cmd_fit(args):
         index = fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
                        split=split, noise=args.noise, progress=not args.quiet,
                        ess_target=args.ess, max_steps=args.max_steps)
-        print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
+        if args.json:
+            print(index.to_json(orient="records", indent=2))
+        else:
+            print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
         warned = int((~index["converged"].astype(bool) | (index["warnings"] > 0)).sum())
         if args.strict and warned:  # as for a single fit: results kept, exit 3
             print(f"skinfit: --strict: {warned} group problem(s) (not converged or warned), see above",
@@ -112,8 +162,15 @@ def _cmd_fit(args):
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
     path = result.save(out / "fit.nc")
     (out / "summary.csv").write_text(result.summary().to_csv())
-    print(result.report_text())
-    print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
+    if args.json:
+        print(json.dumps({"fit": str(path), "summary_csv": str(out / "summary.csv"), "model": result.model_id,
+                          "dataset": result.dataset_id, "seed": int(result.attrs["seed"]),
+                          "converged": bool(result.converged), "warnings": result.warnings,
+                          "summary": json.loads(result.summary().to_json(orient="index")),
+                          "seconds": time.perf_counter() - t0}, indent=2, default=str))
+    else:
+        print(result.report_text())
+        print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
     if args.strict and result.warnings:  # failed or warned (skinfit.guardrails): result kept, exit 3
         print(f"skinfit: --strict: {len(result.warnings)} guard-rail problem(s), see above", file=sys.stderr)
         return 3
@@ -134,16 +191,23 @@ def _lazy(module, function):
 def build_parser():
     p = argparse.ArgumentParser(prog="skinfit", description="Bayesian inference for published "
                                 "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
+    p.add_argument("--version", action="version", version=f"skinfit {_version()}")
+    p.add_argument("--path", action="append", metavar="DIR", default=[],
+                   help="folder with models/, priors/, datasets/ searched first (repeatable); then "
+                        "$SKINFIT_PATH, the user folder, the shipped files (see `skinfit models --verbose`)")
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("models", help="list the model cards (models/*.toml) with units and sources")
     s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each card is from")
     s.set_defaults(func=_cmd_models)
-    s = sub.add_parser("priors", help="show a model's priors with their literature sources")
-    s.add_argument("model", help="model id or path of a prior file")
+    s = sub.add_parser("priors", help="show a model's priors with their literature sources (no MODEL: list prior files)")
+    s.add_argument("model", nargs="?", help="model id or path of a prior file")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each file is from")
     s.set_defaults(func=_cmd_priors)
-    s = sub.add_parser("datasets", help="list the shipped datasets (datasets/*/dataset.toml)")
+    s = sub.add_parser("datasets", help="list the datasets on the search path (datasets/*/dataset.toml)")
     s.add_argument("--json", action="store_true")
+    s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each dataset is from")
     s.set_defaults(func=_cmd_datasets)
     s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
     s.add_argument("model", help="model id (models/<id>.toml) or path")
@@ -165,21 +229,26 @@ def build_parser():
                    help="seconds between checkpoints (OUT/checkpoint.h5) while sampling (default 30)")
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--json", action="store_true", help="print the result as JSON (summary, seed, warnings)")
     s.set_defaults(func=_cmd_fit)
     s = sub.add_parser("compare", help="rank fits of the same data by evidence (log Z, Bayes factors) and LOO")
     s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
     s.add_argument("--method", default="bridge", choices=["bridge", "laplace", "nested"],
                    help="evidence estimator (default bridge sampling)")
+    s.add_argument("--save-evidence", action="store_true",
+                   help="store the evidence in each input fit file (rewrites them; default: inputs untouched)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_lazy("skinfit.compare", "cli_compare"))
     s = sub.add_parser("report", help="write a self-contained static HTML report of fits")
     s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
     s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
+    s.add_argument("--json", action="store_true", help="print the report's path and fits as JSON")
     s.set_defaults(func=_lazy("skinfit.report", "cli_report"))
     s = sub.add_parser("campaign", help="run a (models x datasets x groups) matrix of fits")
     s.add_argument("campaign", help="campaign TOML file")
     s.add_argument("--scheduler", help="Dask scheduler: tcp://HOST:PORT, or 'local' for a LocalCluster")
     s.add_argument("--workers", type=int, default=None, help="local worker processes (default: cores)")
+    s.add_argument("--json", action="store_true", help="print the index as JSON (progress goes to stderr)")
     s.set_defaults(func=_lazy("skinfit.campaign", "cli_campaign"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")
@@ -203,18 +272,71 @@ def build_parser():
     return p
 
 
+def _version():
+    from . import __version__
+
+    return __version__
+
+
+def _format_warning(message, category, filename, lineno, line=None):
+    """One line per warning: its category and message, without the echoed source line."""
+    return f"skinfit: {category.__name__}: {message}\n"
+
+
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    warnings.simplefilter("default")
+    from .paths import set_search_path
+
+    set_search_path(args.path)
+    out = Path(args.out).absolute() if isinstance(getattr(args, "out", None), str) else None
+    while out is not None and not out.parent.exists():  # the topmost folder the command may create
+        out = out.parent
+    fresh = out is not None and not out.exists()
+    shown = warnings.formatwarning
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")  # each distinct warning once
+        warnings.formatwarning = _format_warning
+        try:
+            code = _run(args)
+        finally:
+            warnings.formatwarning = shown
+    if fresh and code not in (0, 3):  # refused or failed: leave no empty output folder behind
+        _remove_empty(out)
+    return code
+
+
+def _remove_empty(folder):
+    """Remove ``folder`` and its sub-folders if they hold no files."""
+    if not folder.is_dir():
+        return
+    for sub in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+        if not any(sub.iterdir()):
+            sub.rmdir()
+    if not any(folder.iterdir()):
+        folder.rmdir()
+
+
+def _run(args):
     try:
         code = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, inside the handler below
     except InputError as exc:
+        print(f"skinfit: error: {exc}", file=sys.stderr)
+        return 2
+    except _NothingFound as exc:
+        print(exc, file=sys.stderr)
+        return 1
+    except MissingDependency as exc:
         print(f"skinfit: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("skinfit: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `skinfit models | head`: the reader left; no traceback
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     return code or 0
 
 

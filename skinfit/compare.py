@@ -69,8 +69,9 @@ def cli_compare(args):
     paths = [Path(r) / "fit.nc" if Path(r).is_dir() else Path(r) for r in args.runs]
     fits = [load_fit(p) for p in paths]
     table = compare(fits, method=args.method)
-    for f, p in zip(fits, paths):  # keep the evidence with the fit for reports and campaigns
-        f.save(p)
+    if args.save_evidence:  # keep the evidence with the fit for reports and campaigns (asked for)
+        for f, p in zip(fits, paths):
+            f.save(p)
     if args.json:
         print(table.reset_index().to_json(orient="records", indent=2))
     else:

@@ -13,7 +13,7 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ._toml import ROOT, available, find_file, read_toml, require
+from ._toml import available, find_file, read_toml, require
 from .errors import InputError
 from .models import _display
 from .units import NONNEGATIVE, UNITS, dimension, to_si
@@ -40,7 +40,7 @@ class Column:
 class Dataset:
     """A validated dataset: a tidy frame in SI units plus its card.
 
-    ``frame`` columns carry the skinfit names (MODELS.md); quantities are float64 in SI,
+    ``frame`` columns carry the skinfit names (docs/models/); quantities are float64 in SI,
     categories are strings.  ``units`` gives, per column, the unit the data came in.
     """
 
@@ -243,6 +243,3 @@ def read_table(raw, columns, where):
 def list_datasets():
     return sorted(available("datasets"))
 
-
-def dataset_root():
-    return Path(ROOT) / "datasets"

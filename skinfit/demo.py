@@ -23,13 +23,13 @@ __all__ = ["DEMO_OPTIONS", "demo_plan", "run_demo"]
 #: match the study design. ``rows`` selects rows by column value; ``split`` maps parameter ->
 #: column, as ``skinfit.fit(split=...)``.
 DEMO_OPTIONS = {
-    # seed 000 fits one alpha per voltage; a shared alpha is the default and the demo keeps it
+    # the electroadhesion paper fits one alpha per voltage; a shared alpha is the default and the demo keeps it
     "contact_area_synthetic": {"rows": {"subject": "S01"},
-                               "why": "seed 003 fits one subject at a time; all 13: --by subject"},
+                               "why": "Huloux, Willemet & Wiertlewski fits one subject at a time; all 13: --by subject"},
     "wavy_synthetic": {"split": {"r": "wavelength", "s": "wavelength"},
-                       "why": "seed 001 needed smaller contact parameters r, s at lambda = 20 mm"},
+                       "why": "Fujii, Okamoto & Yamada needed smaller contact parameters r, s at lambda = 20 mm"},
     "textured_synthetic": {"split": {"beta_h": "material"},
-                           "why": "seed 002 varies the hysteresis fraction beta_h per silicone grade"},
+                           "why": "the Biotribology 2019 paper varies the hysteresis fraction beta_h per silicone grade"},
 }
 
 

@@ -1,6 +1,6 @@
 """The one error type for bad user input, and the warnings skinfit emits."""
 
-__all__ = ["InputError", "ConvergenceWarning", "SupportWarning"]
+__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "MissingDependency", "require_optional"]
 
 
 class InputError(ValueError):
@@ -39,3 +39,22 @@ class ConvergenceWarning(UserWarning):
 
 class SupportWarning(UserWarning):
     """A prediction was requested at a parameter point outside the model's physical support."""
+
+
+class MissingDependency(ImportError):
+    """An optional dependency is not installed; the message names the extra that brings it."""
+
+    def __init__(self, package, extra):
+        self.package, self.extra = package, extra
+        super().__init__(f"{package} is not installed: install skinfit[{extra}] "
+                         f"(pip install 'skinfit[{extra}]')")
+
+
+def require_optional(module, extra):
+    """Import an optional dependency, or raise MissingDependency naming the extra."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MissingDependency(module.split(".")[0], extra) from None

@@ -245,10 +245,9 @@ def nested(loglike, prior_transform, ndim, *, rng, nlive=400, sample="rslice", d
     ``prior_transform(u)`` maps the unit cube to the (normalised) prior. The standard error is
     dynesty's own ``logzerr``.
     """
-    try:
-        import dynesty
-    except ImportError as err:  # pragma: no cover - exercised only without the extra
-        raise ImportError("method='nested' needs dynesty: pip install 'skinfit[nested]'") from err
+    from .errors import require_optional
+
+    dynesty = require_optional("dynesty", "nested")
     t0 = time.perf_counter()
 
     def finite_loglike(theta):

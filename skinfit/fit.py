@@ -81,9 +81,8 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         Minimum effective sample size per parameter to call the run converged.
     n_global, n_local : int
         MAP search: prior draws scored in one vectorised call, then SLSQP from the ``n_local``
-        best of them and a BOBYQA polish (:func:`~skinfit.optimize.find_map`; 0.05-0.4 s on
-        the shipped posteriors; 4 starts found the wavy two-point model's
-        best optimum in 5 of 5 seeds where 2 found it in 2 of 3).
+        best of them and a BOBYQA polish (:func:`~skinfit.optimize.find_map`; measurements in
+        docs/design/sampling.md).
     strict : bool
         Raise instead of warn when the run does not meet its convergence criteria.
     checkpoint : path-like, optional
@@ -112,6 +111,13 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     model = model if isinstance(model, Model) else load_model(model)
     dataset = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    seed_drawn = rng is None
+    if seed_drawn and resume and checkpoint is not None and Path(checkpoint).exists():
+        from .checkpoint import load_checkpoint
+
+        rng = load_checkpoint(checkpoint).meta.get("seed")  # the seed drawn by the interrupted run
+    if rng is None:  # no seed given: draw one and record it, so the fit can be repeated exactly
+        rng = int(np.random.SeedSequence().entropy % 2**63)
     seed = rng if isinstance(rng, (int, np.integer)) else None
     rng = as_generator(rng)
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
@@ -148,6 +154,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
         warnings.warn(msg, ConvergenceWarning, stacklevel=2)
     t_tree = time.perf_counter()
     idata, deferred = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
+    idata.attrs["seed_drawn"] = int(seed_drawn)
     now = time.perf_counter()
     idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds,
                                          "start_s": t_start_s if saved is None else 0.0,
@@ -472,7 +479,11 @@ class Fit:
         s = self.attr("sampler")
         t = self.attr("timings")
         c = self.attr("support_counts")
+        seed = int(self.attrs.get("seed", -1))
+        seed_text = ("a numpy Generator (not recorded)" if seed < 0 else
+                     f"{seed}{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
         lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.attrs['dataset_sha256'][:12]})",
+                 f"seed: {seed_text}",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
@@ -510,6 +521,23 @@ class Fit:
             if os.path.exists(tmp):
                 os.unlink(tmp)
         return path
+
+    def _repr_html_(self) -> str:
+        """Notebook view: model and data, the seed, the convergence verdict with its reasons,
+        the guard-rail warnings and the summary table."""
+        from html import escape
+
+        s = self.attr("sampler")
+        verdict = ("<b style='color:#1a7f37'>converged</b>" if s["converged"] else
+                   "<b style='color:#cf222e'>NOT converged</b>: " + escape("; ".join(s["reasons"])))
+        items = "".join(f"<li><b>{escape(w['status'])}</b> {escape(w['message'])}</li>" for w in self.warnings)
+        seed = int(self.attrs.get("seed", -1))
+        with pd.option_context("display.float_format", "{:.4g}".format):
+            table = self.summary().to_html(float_format="{:.4g}".format, border=0)
+        return (f"<div><p><b>{escape(self.model_id)}</b> on <b>{escape(self.dataset_id)}</b> "
+                f"(data {escape(self.attrs['dataset_sha256'][:12])}; seed {seed if seed >= 0 else 'not recorded'})"
+                f"<br>{verdict}; walkers {s['nwalkers']}, steps {s['n_steps']}, max R-hat {s['rhat_max']:.4f}</p>"
+                + (f"<ul>{items}</ul>" if items else "") + table + "</div>")
 
     def __repr__(self):
         return f"Fit({self.model_id!r} on {self.dataset_id!r}, converged={self.converged})"

@@ -107,10 +107,15 @@ def record_source(result, dataset, label, by):
 
 def card_path(dataset):
     """The absolute path of a dataset's card (``Dataset.path`` is shown relative to the checkout)."""
-    from ._toml import ROOT
+    return _absolute(dataset.path)
 
-    p = Path(dataset.path)
-    return str((p if p.is_absolute() or not (ROOT / p).exists() else ROOT / p).resolve())
+
+def _absolute(card):
+    """A card path as recorded (a shipped card relative to the shipped folder) made absolute."""
+    from .paths import shipped_root
+
+    p, shipped = Path(card), shipped_root()
+    return str((p if p.is_absolute() or shipped is None or not (shipped / p).exists() else shipped / p).resolve())
 
 
 def source_problem(attrs, label, sha256):
@@ -230,8 +235,6 @@ def data_drift(fits):
     whole dataset) are compared with the file now there.  Data that cannot be found are not
     reported (results may be moved to another machine); each card is read once.
     """
-    from ._toml import ROOT
-
     current, messages = {}, []
     for where, result in fits:
         attrs = result.attrs
@@ -240,7 +243,7 @@ def data_drift(fits):
             card, sha256 = recorded["path"], recorded["sha256"]
         elif "[" not in attrs.get("dataset_id", "["):  # a subset's hash is not its file's
             card, sha256 = attrs.get("dataset_path", ""), attrs.get("dataset_sha256")
-            card = str(ROOT / card) if card and not Path(card).is_absolute() else card
+            card = _absolute(card) if card else card
         else:
             continue
         if not card or not Path(card).exists():

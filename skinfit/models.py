@@ -13,7 +13,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ._toml import ROOT, available, find_file, read_toml, require, sha256_file
+from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError, SupportWarning
 
 __all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "NOISE_MODELS"]
@@ -214,7 +214,14 @@ def load_model(name):
 
 def _parse_model(path, digest):
     _, text = read_toml(path)
-    return _parse_model_text(text, _display(path), digest)
+    model = _parse_model_text(text, _display(path), digest)
+    from .references import check_source
+
+    check_source(model.source, model.path, "source")  # keys into references.toml
+    for cname, source in model.constant_sources.items():
+        if source:
+            check_source(source, model.path, f"constants.{cname}.source")
+    return model
 
 
 def _parse_model_text(text, where, digest):
@@ -317,10 +324,9 @@ def _derived_table(doc, where):
 
 
 def _display(path):
-    try:
-        return str(path.resolve().relative_to(ROOT))
-    except ValueError:
-        return str(path)
+    from .paths import display
+
+    return display(path)
 
 
 def list_models():

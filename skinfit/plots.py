@@ -403,7 +403,7 @@ def _reference(spec, fit, idx, xs_si):
     if not (np.all(a == a[0]) and np.all(lam == lam[0])):
         return None
     k = 2 * math.pi / lam[0]
-    return -a[0] * k * np.sin(k * xs_si)  # MODELS.md 2, eq. 2: ratio = g(x)
+    return -a[0] * k * np.sin(k * xs_si)  # docs/models/wavy_surface.md, eq. 2: ratio = g(x)
 
 
 def _grid(fig, nrows, ncols, n_panels, multi, n_obs):

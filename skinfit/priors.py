@@ -16,6 +16,7 @@ from scipy import special, stats
 from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError
 from .models import _display
+from .references import check_source
 
 __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "DISTRIBUTIONS"]
 
@@ -210,6 +211,7 @@ def load_priors(name):
         if key in ("schema_version", "model", "id"):
             continue
         priors[key] = parse_prior(key, spec, where)
+        check_source(priors[key].source, where, f"{key}.source")  # a key into references.toml
     if not priors:
         raise InputError(where, "no priors defined")
     return PriorSet(id=doc.get("id", path.stem), model=model, priors=MappingProxyType(priors),

@@ -163,7 +163,7 @@ def _provenance(fit):
     dprov = json.loads(attrs.get("dataset_provenance", "{}"))
     created = fit.group("posterior").attrs.get("created_at", "")
     return {"model_id": attrs["model_id"], "model_sha": attrs["model_sha256"], "model_title": card.get("title", ""),
-            "model_source": card.get("source", ""), "priors_id": attrs["priors_id"],
+            "model_source": _cited(card.get("source", "")), "priors_id": attrs["priors_id"],
             "priors_sha": attrs["priors_sha256"], "dataset_id": attrs["dataset_id"],
             "dataset_sha": attrs["dataset_sha256"], "dataset_path": attrs.get("dataset_path", ""),
             "dataset_kind": dprov.get("kind", "unknown"), "skinfit": versions.get("skinfit", "unknown"),
@@ -441,6 +441,13 @@ def _comparisons(fits):
     return next(iter(tables.values())) if len(tables) == 1 else tables
 
 
+def _cited(source):
+    """A card's source with each reference key spelled out (authors, title, venue, year)."""
+    from .references import cite_long
+
+    return cite_long(source)
+
+
 def cli_report(args):
     """``skinfit report RUN... --out DIR``."""
     from .fit import load_fit
@@ -454,5 +461,10 @@ def cli_report(args):
     items = _as_fits(fits)
     comparison = _comparisons(items)
     index = write_report(dict(items), args.out, comparison=comparison)
+    if getattr(args, "json", False):
+        import json
+
+        print(json.dumps({"report": str(index), "fits": [name for name, _ in items]}, indent=2))
+        return 0
     print(f"report written: {index}  (open it in a browser; summary.md and CSV tables beside it)")
     return 0

@@ -15,23 +15,11 @@ How a fit samples (:func:`skinfit.fit.start`, :func:`importance_start`, :func:`r
    mixture is refitted to the second half of the chain (1, 3 or 6 components, chosen on
    held-out walkers) unless the chain since the last refit already mixes well (tau <= 4).
    Only the chain after the last refit, a time-homogeneous Markov chain, is judged and kept.
-   (Tried and not adopted, 4 seeds each: up to 10 components, and keeping a chain that needs
-   fewer further steps than a restarted one, both within the seed-to-seed spread on textured
-   and ultrasonic; independence moves alone, 25-40% fewer steps on textured and contact_area
-   but one ultrasonic fit of 4171 steps against at most 1600; a defensive component (10%,
-   twice the chain's spread), ultrasonic mean 1229 -> 1838 steps over 6 seeds; 16 walkers
-   instead of 32, more steps on every model and no faster; importance rounds doubling to 8000
-   draws while below 10% efficiency, ultrasonic importance ESS up 2-5x, steps unchanged.)
 
-Measured on the five shipped posteriors (5 seeds each, this 2-CPU machine; bench/results/):
-the largest integrated autocorrelation time fell from 23-69 steps (DE and snooker moves,
-the previous engine) to 3-10, and a converged electroadhesion fit from 2.7-3.9k steps
-(~6 s) to 400-700 steps (0.5-0.8 s); three independence updates a step then took it to
-150-250 steps (0.09-0.16 s of sampling, 6 seeds).  An independence sampler is only as good
-as its proposal's tails: a walker in a region where the posterior is much larger than the
-mixture rejects for many steps; DE moves, refits and the R-hat gate over walkers guard
-against it, and tests/test_moves.py checks that the move is exact on a known target from a
-mismatched proposal (with a negative control that omits the Hastings factor).
+The measurements behind these choices, and the alternatives tried and not adopted, are in
+docs/design/sampling.md. An independence sampler is only as good as its proposal's tails; DE
+moves, refits and the R-hat gate over walkers guard against a walker stuck where the mixture
+is too thin (tests/test_moves.py checks the move is exact from a mismatched proposal).
 
 Convergence (see NOTES: walkers are not independent chains): after discarding a burn-in of
 ``burn_factor`` integrated autocorrelation times, the kept chain must be at least
@@ -57,13 +45,8 @@ __all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "independe
 #: First step at which the independence proposal is refitted to the chain; later refits at
 #: twice the previous step, for as long as the run has not converged.
 ADAPT_FIRST = 50
-#: No refit while the chain since the last one mixes this well (autocorrelation time, steps).
-#: With three independence updates a step a well-fitted proposal gives 2-3.5 on the shipped
-#: posteriors.  Chosen with :data:`ADAPT_FIRST` by measurement, median sampling seconds over
-#: 8 seeds on ultrasonic (the posterior that refits): (10, 100) 0.40 (steps 400-972),
-#: (5, 100) 0.34, (5, 50) 0.30, (4, 50) 0.29 (250-400 steps), (3, 50) 0.30, (4, 25) 0.30;
-#: over 6 seeds, (10, 100) -> (4, 50): electroadhesion_uniform 1.04 -> 0.89, wavy_surface
-#: 0.90 -> 0.88, the three that never refit unchanged.
+#: No refit while the chain since the last one mixes this well (autocorrelation time, steps);
+#: chosen with :data:`ADAPT_FIRST` by measurement (docs/design/sampling.md).
 TAU_KEEP = 4.0
 #: Importance sampling before the chain (:func:`importance_start`): draws per round, rounds,
 #: the effective sample size below which the weights are too degenerate to refit to, and the
@@ -77,18 +60,10 @@ COMPONENT_CHOICES = (1, 3, 6)
 #: Share of steps that are independence moves (the rest: differential evolution).
 INDEPENDENCE_WEIGHT = 0.8
 #: Independence updates per independence step, evaluated in one call
-#: (:class:`~skinfit.moves.IndependenceMove`).  Chosen by measurement, median sampling
-#: seconds over 6 seeds on each shipped posterior (this 2-CPU machine, checks every 100
-#: steps), with 1 / 2 / 3 / 4 updates: electroadhesion 0.21 / 0.17 / 0.12 / 0.13,
-#: textured_surface 0.23 / 0.22 / 0.17 / 0.20, wavy_surface 1.08 / 1.05 / 0.89 / 1.07,
-#: contact_area 0.14 / 0.10 / 0.09 / 0.13, ultrasonic 0.52 / 0.62 / 0.42 / 0.45; with 3 and
-#: checks every 50 steps (:data:`CHECK_EVERY`): 0.10, 0.17, -, 0.08, 0.39.
+#: (:class:`~skinfit.moves.IndependenceMove`); 3 was fastest of 1-4 (docs/design/sampling.md).
 INDEPENDENCE_SUBSTEPS = 3
-#: Steps between the first convergence checks of a fit (the interval grows to 10% of the chain).
-#: 50: with three independence updates a step the shipped posteriors converge after 100-250
-#: steps (ultrasonic 150-300 since it samples log(mu_inf/(1+q)), 250-550 before), a step costs 0.6-0.8 ms and a check 0.5-2 ms, 7-15 ms once it
-#: computes R-hat (when the other criteria pass) (electroadhesion, median of 6 seeds: 200 ->
-#: 150 steps, sampling 0.12 -> 0.10 s).
+#: Steps between the first convergence checks of a fit (the interval grows to 10% of the
+#: chain); the shipped posteriors converge after 100-300 steps (docs/design/sampling.md).
 CHECK_EVERY = 50
 #: Key of the sampler's evaluation count in a checkpoint's counts.
 SAMPLER_EVALUATIONS = "sampler_evaluations"

@@ -15,7 +15,7 @@ def test_listings(capsys):
     assert "tangential_force [N]" in models["electroadhesion"]["observables"]
     assert main(["priors", "electroadhesion"]) == 0
     out = capsys.readouterr().out
-    assert "E_star [Pa]: lognormal" in out and "source: seed 000 Table I" in out
+    assert "E_star [Pa]: lognormal" in out and "source: Modeling Sliding Friction Between Human Finger and Touchscreen Under Electroadhesion, Table I" in out
     assert main(["datasets"]) == 0
     assert "electroadhesion_synthetic (simulated, 216 rows" in capsys.readouterr().out
 

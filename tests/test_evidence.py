@@ -146,17 +146,17 @@ model = "electroadhesion_coulomb"
 [mu]
 dist = "uniform"
 bounds = [0.0, {mu_hi}]
-source = "test"
+source = "electroadhesion_friction"
 [E_star]
 {e_star}
-source = "test: ignored by the likelihood at 0 V"
+source = "electroadhesion_friction, test: ignored by the likelihood at 0 V"
 [d_air]
 {d_air}
-source = "test: ignored by the likelihood at 0 V"
+source = "electroadhesion_friction, test: ignored by the likelihood at 0 V"
 [sigma]
 dist = "uniform"
 bounds = [0.005, 0.2]
-source = "test"
+source = "electroadhesion_friction"
 """
 
 

@@ -253,7 +253,7 @@ def test_map_error_when_every_start_fails(tmp_path):
     text = (ROOT / "priors" / "electroadhesion.toml").read_text()
     start, end = text.index("[eta]"), text.index("[alpha]")
     bad = tmp_path / "ea.toml"
-    bad.write_text(text[:start] + '[eta]\ndist = "uniform"\nbounds = [0.5, 1.0]\nsource = "test"\n\n' + text[end:])
+    bad.write_text(text[:start] + '[eta]\ndist = "uniform"\nbounds = [0.5, 1.0]\nsource = "electroadhesion_friction"\n\n' + text[end:])
     with pytest.raises(MAPError, match=r"MAP failed: .* outside the physical support: \d+") as info:
         skinfit.fit("electroadhesion", "electroadhesion_synthetic", priors=skinfit.load_priors(str(bad)),
                     rng=0, n_global=200)

@@ -57,14 +57,16 @@ def test_unknown_model_lists_known():
 
 
 def test_missing_shipped_cards_say_where_they_were_looked_for(tmp_path, monkeypatch):
-    """Installed without the checkout (a non-editable install), the shipped cards are not
-    found: the error names the folder searched and the two remedies, not an empty list."""
-    import skinfit._toml
+    """With nothing on the search path (no shipped files, an empty user folder) the error names
+    every folder searched and where it came from, not an empty list."""
+    import skinfit.paths
 
-    monkeypatch.setattr(skinfit._toml, "ROOT", tmp_path)
+    monkeypatch.setattr(skinfit.paths, "shipped_root", lambda: None)
+    monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
+    monkeypatch.delenv("SKINFIT_PATH", raising=False)
     for load, kind in ((skinfit.load_model, "models"), (skinfit.load_priors, "priors"),
                        (skinfit.load_dataset, "datasets")):
-        with pytest.raises(skinfit.InputError, match=f"there is no {tmp_path / kind}.*SKINFIT_HOME"):
+        with pytest.raises(skinfit.InputError, match=f"known: none; searched: {tmp_path / 'user' / kind} \\(user\\)"):
             load("electroadhesion")
 
 

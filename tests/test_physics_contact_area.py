@@ -1,4 +1,4 @@
-"""Contact-area / impedance physics (seed 003): power laws, the area-impedance law, variants."""
+"""Contact-area / impedance physics (Huloux, Willemet & Wiertlewski): power laws, the area-impedance law, variants."""
 
 import tomllib
 from pathlib import Path
@@ -47,7 +47,7 @@ def test_area_is_gamma_times_impedance_to_the_p(subject):
 
 
 def test_p_falls_with_actuation_force_for_every_subject():
-    """Seed 003 Fig. 6c: the exponent p decreases with f_a (m falls and n_z rises with f_a)."""
+    """Huloux, Willemet & Wiertlewski, Fig. 6c: the exponent p decreases with f_a (m falls and n_z rises with f_a)."""
     fa = np.arange(0.0, 31.0, 5.0)
     for s in SUBJECTS.values():
         p = derived(_ens(s), {"actuation_force": fa}, {})["p"][0]
@@ -55,7 +55,7 @@ def test_p_falls_with_actuation_force_for_every_subject():
 
 
 def test_truths_inside_paper_ranges():
-    """Per-subject truths over 0-30 N inside seed 003's ranges over 13 subjects (Section V.A; alpha at
+    """Per-subject truths over 0-30 N inside Huloux, Willemet & Wiertlewski's ranges over 13 subjects (Section V.A; alpha at
     f_a = 0 may exceed its 51.3 mm^2 by up to 7%, since alpha falls with f_a)."""
     fa = np.array([0.0, 30.0])
     for s in SUBJECTS.values():

@@ -1,4 +1,4 @@
-"""Electroadhesion physics against the paper's numbers and closed forms (seed 000)."""
+"""Electroadhesion physics against the paper's numbers and closed forms (the electroadhesion paper)."""
 
 import numpy as np
 import pytest
@@ -12,7 +12,7 @@ TABLE_I = {"E_star": 35e3, "tau0": 10.64e3, "d_air": 0.19e-6, "beta0": 0.0049, "
 
 
 def test_adhesion_energy_section_ii():
-    # seed 000, Section II: dgamma ~ 0.035 J/m^2 at V = 100 V and d_air = 1 um
+    # the electroadhesion paper, Section II: dgamma ~ 0.035 J/m^2 at V = 100 V and d_air = 1 um
     assert adhesion_energy(100.0, 1e-6, C) == pytest.approx(0.035, rel=0.02)
 
 
@@ -70,7 +70,7 @@ def test_root_at_b_eta_zero_limit():
 
 
 def test_table_i_point_leaves_support_near_2N():
-    # MODELS.md: the paper's Table I point gives A_app < 0 near Fn = 2 N when alpha ~ 0.5
+    # docs/models/electroadhesion.md: the paper's Table I point gives A_app < 0 near Fn = 2 N when alpha ~ 0.5
     x = {"normal_force": np.array([0.2, 2.0]), "voltage": np.array([0.0, 0.0])}
     y, ok = electroadhesion({**TABLE_I, "alpha": 0.5}, x, C)
     assert ok.tolist() == [True, False]

@@ -1,4 +1,4 @@
-"""Textured-surface physics (seed 002) against the paper's equations and closed forms."""
+"""Textured-surface physics (the Biotribology 2019 paper) against the paper's equations and closed forms."""
 
 import numpy as np
 import pytest
@@ -9,7 +9,7 @@ from skinfit.physics.textured import (contact_state, critical_load, reduced_modu
                                       textured_no_transition, textured_surface)
 
 C = dict(skinfit.load_model("textured_surface").constants)
-# seed 002 Table 1: (R_asp, h, lambda) [m] and E_m [Pa] of the eight textured samples
+# the Biotribology 2019 paper Table 1: (R_asp, h, lambda) [m] and E_m [Pa] of the eight textured samples
 TABLE_1 = [(18.8e-6, 27.9e-6, 200e-6, 0.20e6), (18.8e-6, 28.9e-6, 200e-6, 0.75e6),
            (18.4e-6, 28.8e-6, 200e-6, 1.30e6), (18.4e-6, 27.1e-6, 200e-6, 2.30e6),
            (20.4e-6, 27.7e-6, 100e-6, 0.20e6), (20.1e-6, 28.1e-6, 100e-6, 0.75e6),

@@ -1,4 +1,4 @@
-"""Ultrasonic friction models (seed 004; MODELS.md section 5): limits, the paper's peak, the
+"""Ultrasonic friction models (Torres et al.; docs/models/ultrasonic.md): limits, the paper's peak, the
 period quadrature's convergence, variants at zero amplitude, vectorisation, memory, finiteness
 over the priors. The shipped dataset and recovery: tests/test_recovery_ultrasonic.py."""
 
@@ -13,7 +13,7 @@ import pytest
 import skinfit
 from skinfit.physics import ultrasonic as us
 
-PAPER = dict(mu_inf=1.86, mu_0=0.156, k_V=0.0048, q=0.0177, V0=0.068)  # seed 004, Fig. 2 fit
+PAPER = dict(mu_inf=1.86, mu_0=0.156, k_V=0.0048, q=0.0177, V0=0.068)  # Torres et al., Fig. 2 fit
 
 
 def _p(**kw):

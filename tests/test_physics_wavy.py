@@ -1,4 +1,4 @@
-"""Wavy-surface models (seed 001; MODELS.md section 2): closed forms, the paper's Section 5
+"""Wavy-surface models (Fujii, Okamoto & Yamada; docs/models/wavy_surface.md): closed forms, the paper's Section 5
 claims, support, vectorisation, the shipped dataset and recovery."""
 
 import importlib.util
@@ -16,7 +16,7 @@ from skinfit.physics.wavy import ball_bearing_ratio, slope, two_point_ratio
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA = ROOT / "datasets" / "wavy_synthetic"
-PAPER = dict(R=7e-3, r=3.4e-3, s=6e-3, mu=0.4, n=-0.3)  # seed 001, Section 6.1
+PAPER = dict(R=7e-3, r=3.4e-3, s=6e-3, mu=0.4, n=-0.3)  # Fujii, Okamoto & Yamada, Section 6.1
 LAM, A = 0.04, 1.5e-3
 X = np.linspace(0.0, LAM, 4001)[:-1]
 

@@ -286,7 +286,7 @@ def standin(tmp_path_factory):
         'generating_parameters = {}\n[columns.normal_force]\nunit = "N"\n[columns.actuation_force]\nunit = "mN"\n'
         '[columns.contact_area]\nunit = "mm^2"\n[columns.impedance]\nunit = "N*s/m"\n')
     (d / "ca.toml").write_text(
-        'schema_version = 1\nid = "ca_standin"\ntitle = "stand-in"\nsource = "test"\n'
+        'schema_version = 1\nid = "ca_standin"\ntitle = "stand-in"\nsource = "electroadhesion_friction"\n'
         'forward = "skinfit.physics._plot_standin:contact_pair"\n'
         '[[observables]]\nname = "contact_area"\nunit = "m^2"\nnoise = "lognormal"\n'
         '[[observables]]\nname = "impedance"\nunit = "N*s/m"\nnoise = "lognormal"\n'
@@ -294,7 +294,7 @@ def standin(tmp_path_factory):
         '[[parameters]]\nname = "alpha_a"\nunit = "m^2/N^m"\n[[parameters]]\nname = "m"\nunit = "1"\n'
         '[[parameters]]\nname = "beta_z"\nunit = "N*s/m"\n[[parameters]]\nname = "n_z"\nunit = "1"\n'
         '[plot]\nx = "normal_force"\npanels = ["actuation_force"]\nxscale = "log"\nyscale = "log"\n')
-    prior = 'dist = "lognormal"\nmedian = {}\nsigma = 1.0\nbounds = [{}, {}]\nsource = "test"\n'
+    prior = 'dist = "lognormal"\nmedian = {}\nsigma = 1.0\nbounds = [{}, {}]\nsource = "electroadhesion_friction"\n'
     (d / "ca_priors.toml").write_text(
         'schema_version = 1\nmodel = "ca_standin"\n'
         + "".join(f"[{n}]\n" + prior.format(m, lo, hi) for n, m, lo, hi in
@@ -318,7 +318,7 @@ def standin(tmp_path_factory):
         'unit = "mm"\n[columns.wavelength]\nunit = "mm"\n[columns.direction]\nunit = "1"\nsigned = true\n'
         '[columns.force_ratio]\nunit = "1"\nsigned = true\n')
     (d / "wavy.toml").write_text(
-        'schema_version = 1\nid = "wavy_standin"\ntitle = "stand-in"\nsource = "test"\n'
+        'schema_version = 1\nid = "wavy_standin"\ntitle = "stand-in"\nsource = "electroadhesion_friction"\n'
         'forward = "skinfit.physics._plot_standin:wavy_offset"\n'
         '[[observables]]\nname = "force_ratio"\nunit = "1"\n'
         + "".join(f'[[covariates]]\nname = "{c}"\nunit = "{u}"\n' for c, u in

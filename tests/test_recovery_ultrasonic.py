@@ -1,4 +1,4 @@
-"""Shipped ultrasonic dataset (seed 004's design, simulated): regeneration, bad covariates
+"""Shipped ultrasonic dataset (Torres et al.'s design, simulated): regeneration, bad covariates
 refused at the data boundary, recovery of the generating parameters (truths inside 95%
 credible intervals, calibrated rule of tests/recovery.py)."""
 
@@ -29,7 +29,7 @@ def test_make_regenerates_data_byte_for_byte(tmp_path):
 
 
 def test_design_is_the_papers():
-    """Seed 004: 20-140 mm/s in steps of 20 (Section III.B); 0, 0.8, 1, 1.2, 1.4, 1.6 um p-p at
+    """Torres et al.: 20-140 mm/s in steps of 20 (Section III.B); 0, 0.8, 1, 1.2, 1.4, 1.6 um p-p at
     58 kHz (Section III.C); finger motion along x and y; 8 participants. Lab units converted."""
     ds = skinfit.load_dataset("ultrasonic_synthetic")
     f = ds.frame
@@ -69,7 +69,7 @@ def test_bad_covariates_are_refused_naming_file_column_row(tmp_path, column, val
 
 
 def test_negative_angles_are_meaningful(tmp_path):
-    """gamma_f = -pi/2 (seed 004 Section IV.C uses +-pi/2): accepted, and the model is even in it."""
+    """gamma_f = -pi/2 (Torres et al. Section IV.C uses +-pi/2): accepted, and the model is even in it."""
     d = _edit(tmp_path, 5, "direction_angle", "-90")
     ds = skinfit.load_dataset(d)
     assert ds.frame["direction_angle"].iloc[4] == pytest.approx(-math.pi / 2)
@@ -116,7 +116,7 @@ def test_recovery_on_the_shipped_dataset():
 
 
 VARIANT_TRUTHS = {
-    # seed 004's Fig. 2 fit; only the period average differs from the shipped generator
+    # Torres et al.'s Fig. 2 fit; only the period average differs from the shipped generator
     "ultrasonic_projected": dict(mu_inf=1.86, mu_0=0.156, k_V=0.0048, q=0.0177, V0=0.068),
     # eq. 1 peaks at 0.905*mu_plus at 3.26*V0: 2.0 at 65 mm/s, inside the design like Fig. 2's peak
     "ultrasonic_constant_mu": dict(mu_plus=2.2, q=0.0177, V0=0.02),

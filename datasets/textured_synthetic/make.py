@@ -3,7 +3,7 @@
     python datasets/textured_synthetic/make.py [OUTPUT.csv]
 
 Reads the generating parameters (with the per-material ``beta_h``), noise and seed from
-dataset.toml beside this file; the sample geometry is seed 002's Table 1.  The output is
+dataset.toml beside this file; the sample geometry is the Biotribology 2019 paper's Table 1.  The output is
 byte-for-byte repeatable.
 """
 
@@ -16,8 +16,8 @@ import numpy as np
 from skinfit.physics.textured import textured_surface
 
 HERE = Path(__file__).resolve().parent
-MODULUS_MPA = {"M10": 0.20, "M30": 0.75, "M40": 1.30, "M60": 2.30}  # seed 002 Table 1
-# seed 002 Table 1: (asperity tip radius um, asperity height um, spacing um); flat: none
+MODULUS_MPA = {"M10": 0.20, "M30": 0.75, "M40": 1.30, "M60": 2.30}  # the Biotribology 2019 paper Table 1
+# the Biotribology 2019 paper Table 1: (asperity tip radius um, asperity height um, spacing um); flat: none
 GEOMETRY_UM = {
     ("L200", "M10"): (18.8, 27.9, 200.0), ("L200", "M30"): (18.8, 28.9, 200.0),
     ("L200", "M40"): (18.4, 28.8, 200.0), ("L200", "M60"): (18.4, 27.1, 200.0),

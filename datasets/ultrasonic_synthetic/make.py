@@ -16,8 +16,8 @@ import numpy as np
 from skinfit.physics.ultrasonic import ultrasonic
 
 HERE = Path(__file__).resolve().parent
-VELOCITIES_MM_S = (20, 40, 60, 80, 100, 120, 140)  # seed 004, Section III.B
-AMPLITUDES_UM = (0.0, 0.8, 1.0, 1.2, 1.4, 1.6)  # seed 004, Section III.C
+VELOCITIES_MM_S = (20, 40, 60, 80, 100, 120, 140)  # Torres et al., Section III.B
+AMPLITUDES_UM = (0.0, 0.8, 1.0, 1.2, 1.4, 1.6)  # Torres et al., Section III.C
 ANGLES_DEG = (90, 0)
 FREQUENCY_KHZ = 58.0
 SUBJECTS = tuple(f"P{i}" for i in range(1, 9))

@@ -1,6 +1,6 @@
-"""Real contact area and ultrasonic impedance of a fingertip pressing on glass (seed 003; MODELS.md section 4).
+"""Real contact area and ultrasonic impedance of a fingertip pressing on glass (Huloux, Willemet & Wiertlewski; docs/models/contact_area.md).
 
-Two power laws of the normal force f per press (eqs. 3 and 4 of seed 003)::
+Two power laws of the normal force f per press (eqs. 3 and 4 of Huloux, Willemet & Wiertlewski)::
 
     A   = alpha_a * f**m          optical real contact area [m^2]
     |Z| = beta_z  * f**n_z        impedance modulus [N*s/m]
@@ -69,7 +69,7 @@ def area_impedance_law(log_alpha_a, m, log_beta_z, n_z):
 
 
 def contact_area(p, x, c):
-    """Contact area [m^2] and impedance modulus [N*s/m] per press (eqs. 3-4 of seed 003).
+    """Contact area [m^2] and impedance modulus [N*s/m] per press (eqs. 3-4 of Huloux, Willemet & Wiertlewski).
 
     Covariates ``normal_force`` f [N] and ``actuation_force`` f_a [N], each (n,); parameters
     as in the module docstring, (k, 1) or (k, n).  Outside the support: ``m <= 0`` or

@@ -1,4 +1,4 @@
-"""Finger sliding on a touchscreen under electroadhesion (seed 000; MODELS.md section 1).
+"""Finger sliding on a touchscreen under electroadhesion (the electroadhesion paper; docs/models/electroadhesion.md).
 
 JKR contact area, adhesive friction with an area ratio that grows with the electroadhesive
 energy, and sliding area reduction; plus the two competing variants of the paper.
@@ -23,7 +23,7 @@ def _series_thickness(d_air, c):
 
 
 def adhesion_energy(voltage, d_air, c):
-    """Electroadhesive energy per unit area dgamma [J/m^2], eq. 8 of seed 000.
+    """Electroadhesive energy per unit area dgamma [J/m^2], eq. 8 of the electroadhesion paper.
 
     ``voltage`` [V] and ``d_air`` [m] broadcast against each other.
     """
@@ -31,7 +31,7 @@ def adhesion_energy(voltage, d_air, c):
 
 
 def jkr_area(normal_force, dgamma, E_star, R):
-    """JKR contact area A0 [m^2] of a sphere of radius ``R`` [m], eq. 6 of seed 000.
+    """JKR contact area A0 [m^2] of a sphere of radius ``R`` [m], eq. 6 of the electroadhesion paper.
 
     Reduces to the Hertz area pi*(3*R*Fn/(4*E_star))**(2/3) when ``dgamma`` is 0.
     """
@@ -42,7 +42,7 @@ def jkr_area(normal_force, dgamma, E_star, R):
 
 
 def electroadhesion(p, x, c):
-    """Tangential force [N] of the adhesive-friction model, eqs. 6, 8, 10, 12 of seed 000.
+    """Tangential force [N] of the adhesive-friction model, eqs. 6, 8, 10, 12 of the electroadhesion paper.
 
     Parameters ``E_star`` [Pa], ``tau0`` [Pa], ``d_air`` [m], ``beta0`` [-], ``phi`` [m^2/J],
     ``eta`` [m^2/N^2], ``alpha`` [-]; covariates ``normal_force`` [N], ``voltage`` [V].
@@ -64,7 +64,7 @@ def electroadhesion(p, x, c):
 
 
 def electroadhesion_coulomb(p, x, c):
-    """Coulomb friction with the parallel-plate electrostatic force, eq. 5 of seed 000.
+    """Coulomb friction with the parallel-plate electrostatic force, eq. 5 of the electroadhesion paper.
 
     ``Ft = mu*(Fn + Fe)``, ``Fe = eps0*A0*V**2 / (2*eps_air*t**2)`` with the stack thickness
     ``t`` and the JKR area ``A0`` of eq. 6.  Parameters ``mu``, ``E_star`` [Pa], ``d_air`` [m].
@@ -79,7 +79,7 @@ def electroadhesion_coulomb(p, x, c):
 
 
 def electroadhesion_empirical(p, x, c):
-    """Empirical power law ``Ft = b*Fn**c + d*Fn`` (appendix eq. 16 of seed 000).
+    """Empirical power law ``Ft = b*Fn**c + d*Fn`` (appendix eq. 16 of the electroadhesion paper).
 
     Parameters ``b`` [N^(1-c)], ``c_exp`` [-], ``d`` [-]; the paper fits them per voltage
     (split by the ``voltage`` column).

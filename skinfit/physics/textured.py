@@ -1,9 +1,9 @@
-"""Finger pad friction on micro-textured silicone (seed 002; MODELS.md section 3).
+"""Finger pad friction on micro-textured silicone (the Biotribology 2019 paper; docs/models/textured_surface.md).
 
 Friction coefficient of eq. 16, ``mu = tau0*A_r/F + alpha + beta_h*(9/(128*R_e))**(2/3)*(F/E0)**(1/3)``,
 with the real contact area ``A_r`` of a finger pad on a square array of spherical-tipped
 asperities.  skinfit reads the paper's Section 3 analytically: the numerical half-space step is
-replaced by Hertz contact of each asperity (MODELS.md).  Below a critical mean pressure the skin
+replaced by Hertz contact of each asperity (docs/models/).  Below a critical mean pressure the skin
 rests on the asperity tips only; above it, a central zone of the apparent (ridge) contact
 ``A_ac = k_a*F**m_a`` touches the flat between the asperities (the transition of eqs. 9-14).
 
@@ -30,7 +30,7 @@ _TEXTURE = ("asperity_radius", "asperity_height", "asperity_spacing")
 
 
 def reduced_modulus(E_skin, E_m, c):
-    """Reduced modulus ``1/((1-nu_skin**2)/E_skin + (1-nu_m**2)/E_m)`` [Pa] (seed 002, eqs. 3, 13)."""
+    """Reduced modulus ``1/((1-nu_skin**2)/E_skin + (1-nu_m**2)/E_m)`` [Pa] (the Biotribology 2019 paper, eqs. 3, 13)."""
     return _reduced(E_skin, _sample_compliance(E_m, c["nu_m"]), c)
 
 
@@ -45,7 +45,7 @@ def _reduced(E_skin, c_m, c):
 
 def critical_load(E_skin_micro, sample_modulus, asperity_radius, asperity_height, asperity_spacing,
                   k_a, m_a, c):
-    """Normal load F_crit [N] at which the transition to full contact starts (eq. 14, seed 002).
+    """Normal load F_crit [N] at which the transition to full contact starts (eq. 14, the Biotribology 2019 paper).
 
     Eq. 14, ``F_crit = 8*sqrt(h**3*R_asp)/(9*lambda**2) * A_ac * E1``, with the apparent area
     ``A_ac = k_a*F_crit**m_a`` evaluated at F_crit itself, solved in closed form:
@@ -58,7 +58,7 @@ def critical_load(E_skin_micro, sample_modulus, asperity_radius, asperity_height
 
 
 def contact_state(p, x, c, *, transition=True, pressures=True):
-    """Contact areas and pressures of the analytic reading of seed 002, Section 3.
+    """Contact areas and pressures of the analytic reading of the Biotribology 2019 paper, Section 3.
 
     Parameters ``E_skin_micro`` [Pa], ``k_a`` [m^2/N^m_a], ``m_a`` [-] (arrays broadcastable to
     (k, n)); covariates ``normal_force`` F [N], ``sample_modulus`` [Pa], ``asperity_radius``,
@@ -146,7 +146,7 @@ def _friction(p, x, c, *, transition, hysteresis):
 
 
 def textured_surface(p, x, c):
-    """Dynamic friction coefficient [-] of a finger pad on textured silicone (eq. 16, seed 002).
+    """Dynamic friction coefficient [-] of a finger pad on textured silicone (eq. 16, the Biotribology 2019 paper).
 
     Parameters ``E_skin_micro`` [Pa], ``E_fingerpad`` [Pa], ``tau0`` [Pa], ``alpha`` [-],
     ``beta_h`` [-], ``k_a`` [m^2/N^m_a], ``m_a`` [-]; covariates ``normal_force`` [N],

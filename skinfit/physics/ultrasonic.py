@@ -1,15 +1,15 @@
-"""Finger friction vs sliding velocity under longitudinal ultrasonic vibration (seed 004;
-MODELS.md section 5).
+"""Finger friction vs sliding velocity under longitudinal ultrasonic vibration (Torres et al.;
+docs/models/ultrasonic.md).
 
 The equilibrium friction coefficient of stress-aided depinning of polymer chains (eq. 3,
 after the molecular friction theories of Schallamach and of Chernyak & Leonov, refs. [19], [14]
-of seed 004), with a speed-dependent friction factor (eq. 4), averaged over one vibration
+of Torres et al.), with a speed-dependent friction factor (eq. 4), averaged over one vibration
 period of the relative velocity between finger and plate (eq. 5).
 
 The period average is a fixed-phase quadrature over [0, pi] (by the symmetry
 ``cos(wt) = cos(-wt)``), split where the relative velocity's x component changes sign (for
 motion along the vibration axis the speed |v_x| has a kink there), with Gauss-Legendre nodes on
-each smooth piece. MODELS.md suggests the midpoint rule; measured on the shipped design at the
+each smooth piece. docs/models/ultrasonic.md suggests the midpoint rule; measured on the shipped design at the
 paper's parameters, the midpoint rule over the half period changed by 6e-3 from 48 to 96 phases
 and still by 2e-5 from 1000 to 2000 (O(h^2) at the kink), while ``PHASES`` = 48 Gauss-Legendre
 nodes per piece change the average by < 1e-8 when doubled (32 would give 4e-7; the test asks
@@ -71,7 +71,7 @@ def _bracket_series(s):
 
 
 def mu_equilibrium(v, mu_star, q, v0):
-    """Equilibrium friction coefficient mu_E at speed ``v`` >= 0 [m/s] (eq. 3 of seed 004).
+    """Equilibrium friction coefficient mu_E at speed ``v`` >= 0 [m/s] (eq. 3 of Torres et al.).
 
     ``mu_E = 2*mu_star*(q+1)*(Vs*(1-exp(-1/Vs)) - exp(-1/Vs)) / (1 + q - exp(-1/Vs))``,
     ``Vs = v/v0``; tends to 0 as ``v -> 0`` (the bracket behaves like Vs).  ``v`` may lack the
@@ -86,7 +86,7 @@ def mu_equilibrium(v, mu_star, q, v0):
 
 
 def mu_speed(v, mu_inf, mu_0, k_v):
-    """Speed-dependent friction factor mu*(V) (eq. 4 of seed 004, sign as printed)."""
+    """Speed-dependent friction factor mu*(V) (eq. 4 of Torres et al., sign as printed)."""
     return _eq4(np.asarray(v, dtype=float) ** 2, mu_inf, mu_0, k_v)
 
 
@@ -156,7 +156,7 @@ def _eq5(velocity, angle, amplitude_pp, frequency, m):
 
 
 def period_average(f, velocity, angle, amplitude_pp, frequency, m=PHASES):
-    """Average over one vibration period of ``f(speed, v_x, v_y)`` (eq. 5 of seed 004).
+    """Average over one vibration period of ``f(speed, v_x, v_y)`` (eq. 5 of Torres et al.).
 
     The plate vibrates along x with peak-to-peak ``amplitude_pp`` [m] at ``frequency`` [Hz];
     the finger moves at ``velocity`` [m/s] at ``angle`` [rad] to the vibration axis. ``f`` is
@@ -331,12 +331,12 @@ def ultrasonic(p, x, c):
 
 def ultrasonic_projected(p, x, c):
     """As :func:`ultrasonic`, averaging only the friction component along the finger's own
-    direction, ``mu_E(|v_r|) * (v_r . u_f)/|v_r|`` (the competitor of seed 004's Section IV)."""
+    direction, ``mu_E(|v_r|) * (v_r . u_f)/|v_r|`` (the competitor of Torres et al.'s Section IV)."""
     return {"friction_coefficient": _average(p, x, projected=True)}, _support(p)
 
 
 def ultrasonic_constant_mu(p, x, c):
-    """Eq. 1 of seed 004, period-averaged: eq. 3 with the constant ``mu_plus`` in place of mu*(V).
+    """Eq. 1 of Torres et al., period-averaged: eq. 3 with the constant ``mu_plus`` in place of mu*(V).
 
     Read literally: ``mu_plus`` is the prefactor of eq. 1 (the printed brace holds the whole
     fraction), not the peak of mu_E as the paper's prose calls it; at q = 0.0177 the curve

@@ -1,4 +1,4 @@
-"""Fingertip sliding over a sinusoidal surface (seed 001; MODELS.md section 2).
+"""Fingertip sliding over a sinusoidal surface (Fujii, Okamoto & Yamada; docs/models/wavy_surface.md).
 
 The force ratio f_x/f_y of a finger sliding over ``y(x) = a*cos(2*pi*x/lambda)``: the ball-
 bearing model (ratio = surface slope, eq. 2) and the two-point model, in which the contact is
@@ -20,7 +20,7 @@ def slope(x, amplitude, wavelength):
 
 
 def ball_bearing_ratio(x, amplitude, wavelength):
-    """Force ratio of a frictionless point contact: the surface slope (eq. 2 of seed 001)."""
+    """Force ratio of a frictionless point contact: the surface slope (eq. 2 of Fujii, Okamoto & Yamada)."""
     return slope(x, amplitude, wavelength)
 
 
@@ -56,7 +56,7 @@ def _covariates(x):
 
 
 def wavy_surface(p, x, c):
-    """Two-point model with load-dependent friction (eqs. 6-13 of seed 001).
+    """Two-point model with load-dependent friction (eqs. 6-13 of Fujii, Okamoto & Yamada).
 
     Parameters ``R``, ``r``, ``s`` [m], ``mu`` [-] (at 1 N per point), ``n`` [-]; covariates
     ``position``, ``amplitude``, ``wavelength`` [m], ``direction`` (+1/-1), ``normal_force`` [N].

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# CI jobs for the package as users get it (after scripts/test.sh, which made .venv):
+#  1. the lowest direct dependency versions pyproject allows (uv --resolution lowest-direct),
+#     running a fast subset of the tests;
+#  2. a wheel built from this checkout, installed in a clean venv and run from an empty folder.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+export MPLBACKEND=Agg UV_SYSTEM_CERTS=1
+PY=$(bash scripts/find_python.sh)
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+.venv/bin/python -m pip install --quiet "uv>=0.13.9"  # UV_SYSTEM_CERTS: the system CA store
+UV=.venv/bin/uv
+
+echo "== lowest direct versions =="
+"$UV" venv -q --python "$PY" "$WORK/low"
+VIRTUAL_ENV="$WORK/low" "$UV" pip install -q --resolution lowest-direct -e ".[test]"
+VIRTUAL_ENV="$WORK/low" "$UV" pip freeze | grep -Ei '^(numpy|scipy|pandas|xarray|arviz[a-z-]*|emcee|nlopt|h5netcdf|h5py|matplotlib|jinja2|platformdirs)=='
+"$WORK/low/bin/python" -m pytest -q -p no:cacheprovider -m "not slow" tests/test_models.py tests/test_priors.py \
+  tests/test_data.py tests/test_physics_electroadhesion.py tests/test_fit.py tests/test_compare.py \
+  tests/test_references.py tests/test_public_api.py
+
+echo "== wheel in a clean venv, run from an empty folder =="
+.venv/bin/python -m pip wheel --quiet --no-deps -w "$WORK/dist" .
+"$UV" venv -q --python "$PY" "$WORK/wheel"
+VIRTUAL_ENV="$WORK/wheel" "$UV" pip install -q "$WORK"/dist/skinfit-*.whl
+mkdir "$WORK/empty"
+cd "$WORK/empty"
+SK="$WORK/wheel/bin/skinfit"
+set -x
+"$SK" --version
+"$SK" models | grep -c '^[a-z_]*: '
+"$SK" datasets | grep -c '^[a-z_]*_synthetic '
+"$SK" fit electroadhesion electroadhesion_synthetic --out X --seed 1 --quiet | tail -n 3
+test -s X/fit.nc
+set +x
+cd "$ROOT"
+echo "wheel checks passed"
+
+echo "== documentation: mkdocs build --strict (executes the tutorial notebook) =="
+"$UV" venv -q --python "$PY" "$WORK/docs"
+VIRTUAL_ENV="$WORK/docs" "$UV" pip install -q -e ".[docs]"
+NO_MKDOCS_2_WARNING=1 "$WORK/docs/bin/mkdocs" build --strict -d "$WORK/site"
+echo "documentation built"

@@ -1,0 +1,133 @@
+"""Where skinfit finds model cards, prior files and datasets.
+
+A search path of folders, first match wins: folders given explicitly (``skinfit --path DIR``,
+:func:`set_search_path`) > the folders in ``$SKINFIT_PATH`` (``os.pathsep``-separated) > the
+user folder (``platformdirs.user_data_dir("skinfit")``) > the files shipped with skinfit. Each
+folder holds the repository's layout: ``models/<id>.toml``, ``priors/<id>.toml``,
+``datasets/<id>/dataset.toml``; a missing sub-folder is skipped.
+
+The shipped files are the repository's top-level ``models/``, ``priors/`` and ``datasets/``,
+packed into the wheel as ``skinfit/_shipped/`` and read with :mod:`importlib.resources`; in a
+source checkout (``pip install -e .``) they are read in place.
+"""
+
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from .errors import InputError
+
+__all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path",
+           "shipped_root", "user_root"]
+
+KINDS = ("models", "priors", "datasets")
+ENV = "SKINFIT_PATH"
+_EXPLICIT: list[Path] = []
+
+
+@dataclass(frozen=True)
+class Root:
+    """One folder of the search path and where it came from (``--path``, ``$SKINFIT_PATH``,
+    ``user`` or ``shipped``)."""
+
+    path: Path
+    origin: str
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One model card, prior file or dataset found on the search path."""
+
+    id: str
+    path: Path  # the card file (datasets: datasets/<id>/dataset.toml)
+    root: Root
+    shadows: tuple[Root, ...] = ()  # later folders on the path holding the same id
+
+
+def set_search_path(folders) -> None:
+    """Put ``folders`` (paths) first on the search path, for this process."""
+    _EXPLICIT[:] = [Path(f).expanduser() for f in folders]
+
+
+def shipped_root() -> Path | None:
+    """The folder holding the shipped models/, priors/, datasets/ (None if neither the wheel's
+    ``skinfit/_shipped`` nor a source checkout's top level has them)."""
+    package = resources.files("skinfit")
+    shipped = package / "_shipped"
+    if shipped.is_dir() and isinstance(shipped, Path):
+        return shipped
+    checkout = Path(os.fspath(package)).resolve().parent if isinstance(package, Path) else None
+    if checkout is not None and (checkout / "models").is_dir() and (checkout / "pyproject.toml").is_file():
+        return checkout
+    return None
+
+
+def user_root() -> Path:
+    """The per-user folder (e.g. ``~/.local/share/skinfit`` on Linux)."""
+    import platformdirs
+
+    return Path(platformdirs.user_data_dir("skinfit", appauthor=False))
+
+
+def search_path() -> list[Root]:
+    """The folders searched, first match wins (see the module docstring)."""
+    roots = [Root(p, "--path") for p in _EXPLICIT]
+    roots += [Root(Path(p).expanduser(), f"${ENV}") for p in os.environ.get(ENV, "").split(os.pathsep) if p]
+    roots.append(Root(user_root(), "user"))
+    shipped = shipped_root()
+    if shipped is not None:
+        roots.append(Root(shipped, "shipped"))
+    return roots
+
+
+def _cards(kind: str, folder: Path) -> dict[str, Path]:
+    base = folder / kind
+    if not base.is_dir():
+        return {}
+    if kind == "datasets":
+        return {d.name: d / "dataset.toml" for d in sorted(base.iterdir()) if (d / "dataset.toml").is_file()}
+    return {f.stem: f for f in sorted(base.glob("*.toml"))}
+
+
+def entries(kind: str) -> dict[str, Entry]:
+    """Every id of ``kind`` on the search path -> the entry that wins, with the folders it shadows."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS} (got {kind!r})")
+    found: dict[str, Entry] = {}
+    for root in search_path():
+        for cid, path in _cards(kind, root.path).items():
+            if cid in found:
+                e = found[cid]
+                found[cid] = Entry(e.id, e.path, e.root, (*e.shadows, root))
+            else:
+                found[cid] = Entry(cid, path, root)
+    return dict(sorted(found.items()))
+
+
+def locate(kind: str, name) -> Path:
+    """The card file for ``name``: an existing path (a ``.toml`` file, or a dataset folder) is
+    taken as given; otherwise ``name`` is an id looked up on the search path."""
+    p = Path(name)
+    if kind == "datasets" and p.is_dir() and (p / "dataset.toml").is_file():
+        return p / "dataset.toml"
+    if p.suffix == ".toml" and p.is_file():
+        return p
+    entry = entries(kind).get(str(name))
+    if entry is not None:
+        return entry.path
+    known = ", ".join(entries(kind)) or "none"
+    searched = "; ".join(f"{r.path / kind} ({r.origin})" for r in search_path())
+    raise InputError(str(name), f"no such {kind[:-1]} (known: {known}; searched: {searched})")
+
+
+def display(path: Path) -> str:
+    """How a card is named in messages and results: a shipped one relative to the shipped
+    folder (``models/electroadhesion.toml``), any other by the path as given."""
+    shipped = shipped_root()
+    if shipped is not None:
+        try:
+            return str(Path(path).resolve().relative_to(shipped.resolve()))
+        except ValueError:
+            pass
+    return str(path)

@@ -1,0 +1,85 @@
+"""Every source in the shipped cards and prior files cites a work in skinfit/references.toml."""
+
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+
+import skinfit
+from skinfit.references import check_source, cite, parse_source, references
+
+ROOT = Path(skinfit.__file__).resolve().parents[1]
+FILES = sorted([*ROOT.glob("models/*.toml"), *ROOT.glob("priors/*.toml")])
+
+
+def _sources(doc, prefix=""):
+    """(field path, source string) for every `source` anywhere in a TOML document."""
+    for key, value in doc.items():
+        if isinstance(value, dict):
+            yield from _sources(value, f"{prefix}{key}.")
+        elif key == "source":
+            yield f"{prefix}{key}", value
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_every_source_key_resolves(path):
+    sources = list(_sources(tomllib.loads(path.read_text())))
+    assert sources, f"{path.name} cites nothing"
+    for field, source in sources:
+        for key, _ in parse_source(source):
+            assert key in references(), f"{path.name}: {field}: unresolved reference key {key!r} in {source!r}"
+
+
+def test_every_reference_has_a_title_and_every_doi_its_form():
+    for key, ref in references().items():
+        assert ref["title"].strip(), key
+        if "doi" in ref:
+            assert re.fullmatch(r"10\.\d{4,9}/\S+", ref["doi"]), key
+        if "year" in ref:
+            assert 1800 < ref["year"] < 2030, key
+
+
+def test_no_seed_file_numbers_anywhere_users_read():
+    """Sources are cited by key/authors/title, never as 'seed 00N' (the file names of the
+    project's private copies of the papers)."""
+    pattern = re.compile(r"seed 00\d", re.I)
+    for path in [*FILES, *ROOT.glob("datasets/*/dataset.toml"), *ROOT.glob("skinfit/**/*.py"),
+                 ROOT / "README.md", *ROOT.glob("docs/**/*.md"), *ROOT.glob("reports/example/*")]:
+        if path.is_file():
+            assert not pattern.search(path.read_text(errors="replace")), path
+
+
+def test_an_unknown_key_is_refused_at_load(tmp_path):
+    text = (ROOT / "priors" / "electroadhesion.toml").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace('source = "electroadhesion_friction, Table I range 2-100 kPa',
+                                'source = "electroadhesion2020, Table I range 2-100 kPa', 1))
+    assert bad.read_text() != text
+    with pytest.raises(skinfit.InputError, match=r"bad.toml: E_star.source: .*reference key.*'electroadhesion2020'"):
+        skinfit.load_priors(str(bad))
+    with pytest.raises(skinfit.InputError, match="expected a reference key .*got 'Smith et al. 2020, eq. 3'"):
+        check_source("Smith et al. 2020, eq. 3", "card.toml", "source")
+
+
+def test_a_references_file_on_the_search_path_adds_keys(tmp_path, monkeypatch):
+    import skinfit.paths
+
+    (tmp_path / "references.toml").write_text('schema_version = 1\n[mylab2026]\ntitle = "Our own model"\n'
+                                              'authors = ["A. Researcher"]\nyear = 2026\n')
+    monkeypatch.setenv("SKINFIT_PATH", str(tmp_path))
+    assert cite("mylab2026, eq. 2") == "Our own model, eq. 2"
+    assert check_source("mylab2026, eq. 2; fujii_wavy, eq. 13", "card.toml", "source")
+
+
+def test_cite_spells_out_keys_and_keeps_locators():
+    assert parse_source("fujii_wavy, Section 6.2: n = -0.3; more on it; dzidek2017: E ~ 40 kPa") == [
+        ("fujii_wavy", "Section 6.2: n = -0.3; more on it"), ("dzidek2017", "E ~ 40 kPa")]
+    assert cite("fujii_wavy, eq. 13; dzidek2017") == "Fujii, Okamoto & Yamada, eq. 13; Dzidek et al. 2017"
+
+
+@pytest.mark.parametrize("path", sorted(ROOT.glob("models/*.toml")), ids=lambda p: p.stem)
+def test_every_card_links_to_its_model_documentation(path):
+    m = re.search(r"docs/models/[a-z_]+\.md", path.read_text())
+    assert m and (ROOT / m.group(0)).is_file(), path.name
+    assert path.stem in (ROOT / m.group(0)).read_text() or path.stem in (ROOT / "docs/models/index.md").read_text()
