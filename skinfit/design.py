@@ -511,6 +511,13 @@ def _numbers(raw, where, field):
     return np.asarray(raw, dtype=float)
 
 
+def _to_u(draws, is_log):
+    """Natural parameters (k, d) -> the coordinate u (log where ``is_log``)."""
+    u = np.array(draws, dtype=float)
+    u[:, is_log] = np.log(u[:, is_log])
+    return u
+
+
 def _coordinates(priors, names):
     """Per parameter: log coordinate when its prior's lower bound is > 0, else natural."""
     return np.array([priors[n].lower > 0 for n in names])
@@ -528,7 +535,8 @@ def _model_problem(model, draws, is_log, noise, sigma, constants, log_density, l
         out = np.empty((len(u), _n_candidates(X), len(obs)))
         step = max(1, 2_000_000 // max(_n_candidates(X), 1))
         for i in range(0, len(u), step):
-            theta = np.where(is_log, np.exp(u[i:i + step]), u[i:i + step])
+            theta = np.array(u[i:i + step], dtype=float)
+            theta[:, is_log] = np.exp(theta[:, is_log])
             p = {n: theta[:, j:j + 1] for j, n in enumerate(names)}
             with np.errstate(all="ignore"):
                 y, ok = model.forward(p, X, c)
@@ -538,7 +546,7 @@ def _model_problem(model, draws, is_log, noise, sigma, constants, log_density, l
                     out[i:i + step, :, r] = np.where(np.broadcast_to(ok, v.shape) & np.isfinite(v), v, np.nan)
         return out
 
-    u = np.where(is_log, np.log(draws), draws)
+    u = _to_u(draws, is_log)
     loc = u.mean(axis=0) if loc is None else loc
     cov = np.atleast_2d(np.cov(u, rowvar=False)) if cov is None else cov
     return DesignProblem(tuple(names), mean, np.asarray(sigma, float), nu, u, loc, cov,
@@ -763,7 +771,7 @@ def design(fit_or_model, candidates, n=24, params=None, rng=None, *, discriminat
         noise, sigma = _noise_setup(model, priors, noise_kinds, noise_scale, cols)
         draws = np.column_stack([cols[p] for p in names])
         is_log = _coordinates(priors, names)
-        u = np.where(is_log, np.log(draws), draws)
+        u = _to_u(draws, is_log)
         loc, cov = u.mean(axis=0), np.atleast_2d(np.cov(u, rowvar=False))
         dens, marg = _gaussian_density(loc, cov)
         problem = _model_problem(model, draws, is_log, noise, sigma, post.constants, dens, marg, loc, cov)
