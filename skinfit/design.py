@@ -121,6 +121,27 @@ def _log_lik(y, mu, sigma, nu):
     return np.where(np.isnan(ll), -np.inf, ll).sum(axis=-1)
 
 
+def _log_sum_lik(y, mu, sigma, nu):
+    """log sum_m p(y_n | mu_m) for y (N, C, r), mu (M, C, r) -> (N, C): the hot loop of
+    :func:`eig_nmc`, in place for a normal likelihood (NaN predictions count as zero)."""
+    if not np.all(np.isinf(nu)):
+        return special.logsumexp(_log_lik(y[:, None], mu[None], sigma, nu), axis=1)
+    mu = np.where(np.isnan(mu), np.inf, mu) / sigma
+    y = y / sigma
+    q = np.zeros((len(y), len(mu), y.shape[1]))
+    for r in range(y.shape[2]):
+        d = np.subtract(y[:, None, :, r], mu[None, :, :, r])
+        d *= d
+        q += d
+    q *= -0.5
+    top = q.max(axis=1)
+    top = np.where(np.isfinite(top), top, 0.0)
+    q -= top[:, None]
+    np.exp(q, out=q)
+    with np.errstate(divide="ignore"):
+        return np.log(q.sum(axis=1)) + top - np.log(sigma).sum() - 0.5 * _LOG_2PI * y.shape[2]
+
+
 def _noise(rng, shape, nu):
     """Standardised noise draws of shape (..., r)."""
     eps = rng.standard_normal(shape)
@@ -178,8 +199,7 @@ def eig_nmc(problem, X, rng, *, params=None, n_outer=500, n_inner=500, upper=Fal
     block = max(1, _CELLS // max(N * M, 1))
     for c in range(0, C, block):
         s = slice(c, c + block)
-        ll = _log_lik(y[:, None, s], mu_in[None, :, s], problem.sigma, problem.nu)  # (N, M, Cb)
-        log_evid[:, s] = special.logsumexp(ll, axis=1)
+        log_evid[:, s] = _log_sum_lik(y[:, s], mu_in[:, s], problem.sigma, problem.nu)
     if len(focus) == problem.d:
         log_num = log_true
     else:  # p(y | psi_n): inner draws with the outer draw's target values swapped in
@@ -780,7 +800,7 @@ def design(fit_or_model, candidates, n=24, params=None, rng=None, *, discriminat
         noise, sigma = _noise_setup(model, priors, noise_kinds, noise_scale)
         problem = _prior_problem(model, priors, rng, n_draws, noise, sigma)
         start = f"the priors {priors.path or priors.id} ({n_draws} draws)"
-    problem, dropped = _restrict_to_support(problem, [X, x_base])
+    problem, dropped = _restrict_to_support(problem, [X, x_base], gaussian=fit is not None)
     focus = problem.focus_index(targets)
 
     eig, eig_se = eig_nmc(problem, X, rng, params=params, n_outer=n_outer, n_inner=n_inner)
@@ -871,18 +891,53 @@ def design(fit_or_model, candidates, n=24, params=None, rng=None, *, discriminat
                         disc_table, plot)
 
 
-def _restrict_to_support(problem, designs):
-    """Drop draws whose prediction is outside the physical support at any point of ``designs``."""
-    ok = np.ones(len(problem.draws), dtype=bool)
-    for X in designs:
-        mu = problem.mean(problem.draws, X)
-        ok &= np.isfinite(mu).all(axis=(1, 2))
+def _restrict_to_support(problem, designs, gaussian=False):
+    """Condition the current distribution on predictions inside the physical support at every
+    point of ``designs``: draws outside are dropped, the Gaussian approximation is refitted to
+    the rest and the densities for importance sampling become the restricted ones, p(u) 1[valid]
+    / Z with Z the kept fraction (a refitted Gaussian when ``gaussian``, for a fit's posterior).
+    The marginal of a target subset psi picks up P(valid | psi) / Z, estimated over the kept
+    fraction of the draws' nuisance values.  Returns (problem, number dropped)."""
+    from dataclasses import replace
+
+    X_all = {k: np.concatenate([np.asarray(X[k], float) for X in designs]) for k in designs[0]}
+
+    def valid(u):
+        return np.isfinite(problem.mean(np.atleast_2d(u), X_all)).all(axis=(1, 2))
+
+    ok = valid(problem.draws)
     if ok.sum() < 50:
         raise InputError("candidates", f"only {int(ok.sum())} of {len(ok)} parameter draws give predictions inside "
                          f"the model's physical support at every candidate: narrow the candidate range")
-    from dataclasses import replace
+    if ok.all():
+        return problem, 0
+    draws = problem.draws[ok]
+    loc, cov = draws.mean(axis=0), np.atleast_2d(np.cov(draws, rowvar=False))
+    log_z = math.log(ok.mean())
+    if gaussian:
+        base, base_marginal = _gaussian_density(loc, cov)
+        log_z = 0.0
+    else:
+        base, base_marginal = problem.log_density, problem.log_marginal
+    all_draws = problem.draws
 
-    return replace(problem, draws=problem.draws[ok]), int((~ok).sum())
+    def log_density(u):
+        u = np.atleast_2d(u)
+        return np.where(valid(u), base(u) - log_z, -np.inf)
+
+    def log_marginal(u, idx):
+        u = np.atleast_2d(u)
+        out = base_marginal(u, idx) - log_z
+        sample = all_draws[:200]
+        for i, row in enumerate(u):
+            swapped = sample.copy()
+            swapped[:, idx] = row[idx]
+            frac = valid(swapped).mean()
+            out[i] += math.log(frac) if frac > 0 else -np.inf
+        return out
+
+    return replace(problem, draws=draws, loc=loc, cov=cov, log_density=log_density,
+                   log_marginal=log_marginal), int((~ok).sum())
 
 
 # ---- figure, report section, command line -------------------------------------------------------
