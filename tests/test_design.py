@@ -203,3 +203,15 @@ def test_same_seed_same_plan():
     pd.testing.assert_frame_equal(a.table, b.table)
     pd.testing.assert_frame_equal(a.comparison, b.comparison)
     assert a.settings["seed"] == 7
+
+
+def test_report_section_shows_plan_comparison_and_figure(tmp_path):
+    from skinfit.design import design_section_html
+
+    cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
+                                                                                          "values": [0, 200]}}}
+    result = skinfit.design("electroadhesion", cands, n=3, rng=2, n_outer=40, n_inner=40, noise_scale=0.02)
+    html = design_section_html(result, tmp_path / "figures")
+    assert (tmp_path / "figures" / "design_electroadhesion.png").stat().st_size > 1000
+    assert 'src="figures/design_electroadhesion.png"' in html
+    assert html.count("<table") == 3 and "Plan vs baseline" in html
