@@ -52,7 +52,7 @@ from scipy import special, stats
 from .errors import InputError
 from .units import UNITS, dimension, to_si
 
-__all__ = ["DesignProblem", "DesignResult", "design", "read_candidates", "eig_nmc", "laplace_gains",
+__all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
            "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "cli_design"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
