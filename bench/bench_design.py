@@ -144,6 +144,9 @@ def study_eig(n_exp, seed):
                           "observed ratio 90% (bootstrap)": [f"{lo:.3f}-{hi:.3f}" for lo, hi in
                                                              zip(*np.percentile(boot, [5, 95], axis=0))]},
                          index=names)
+    lo, hi = np.percentile(boot, [5, 95], axis=0)
+    table["predicted ratio inside"] = np.where((result.sd["plan/baseline"] >= lo) & (result.sd["plan/baseline"] <= hi),
+                                               "yes", "no")
     return result, table, {"design_s": t_design, "fits_s": t_fits, "nonconverged": nonconv, "n": len(truths)}
 
 
