@@ -25,12 +25,14 @@ Estimators (every random draw from the one ``rng``):
   one.  The EIG of the whole batch is then estimated jointly by nested Monte Carlo with
   Laplace-based importance sampling of the inner draws (Beck et al. 2018, "Fast Bayesian
   experimental design: Laplace-based importance sampling for the expected information gain"),
-  which stays unbiased where plain inner sampling from the prior saturates.
-* Discrimination: the expected log Bayes factor of the generating model against its best
-  competitor, each model's marginal likelihood of the simulated batch by nested Monte Carlo
-  over its own prior (or fit) draws, and the probability that it exceeds 3; greedy over points.
-  These marginal likelihoods are biased low once a batch determines the parameters (for every
-  model), so the values rank designs; bench/bench_design.py checks them against full fits.
+  which stays accurate where plain inner sampling from the prior saturates.
+* Discrimination: greedy on the expected log Bayes factor of the generating model against its
+  best competitor (capped at +-6 nats), each model's marginal likelihood of the simulated batch
+  by nested Monte Carlo over its own prior (or fit) draws at the fixed noise sd; these are
+  biased low once a batch determines the parameters, so they only rank candidates.  The
+  plan's and the baseline's median ln BF and P(ln BF > 3) come from Laplace evidences of every
+  model for each simulated batch, the noise sd integrated over its prior (a misfitting model
+  inflates its noise, as a fit does).  bench/bench_design.py checks them against full fits.
 
 The noise model of each observable is the model card's (or the fit's); its scale is fixed at
 the fit's posterior median, else the prior's median, unless ``noise_scale`` is given.
@@ -40,7 +42,6 @@ the draws (the support is part of the model; how many is reported).
 
 import json
 import math
-import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -672,10 +673,9 @@ def _gaussian_density(loc, cov):
 
 def _noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None):
     """observable -> (kind, nu) and sigma (r,) in the likelihood's space."""
-    from .posterior import noise_parameter_names, noise_suffix
+    from .posterior import noise_suffix
 
     obs = model.observable_names
-    names = noise_parameter_names(obs, noise_kinds)
     scale = {}
     for o in obs:
         suffix = noise_suffix(obs, o)
@@ -695,7 +695,6 @@ def _noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None):
             nu[o] = float(np.median(fit_draws[key])) if fit_draws is not None else float(priors[key].ppf(0.5))
         else:
             nu[o] = np.inf
-    del names
     return {o: (noise_kinds[o], nu[o]) for o in obs}, np.array([scale[o] for o in obs])
 
 
@@ -906,7 +905,6 @@ def design(fit_or_model, candidates, n=24, params=None, rng=None, *, discriminat
         disc_table["generating"] = [ids[a] for a in disc_table["generating"]]
         disc_table = disc_table[["design", "generating", "expected_ln_bf_capped", "se", "median_ln_bf",
                                  "p_ln_bf_gt_3"]]
-        gains = np.full(len(idx), np.nan)
         _, _, _, u_outer = greedy_plan(problem, X, 0, rng, params=params, n_outer=n_batch)
         selection = ("greedy on the expected ln Bayes factor (capped at +-6) of the generating model against its "
                      "best competitor (nested Monte Carlo marginal likelihoods over each model's draws)")
