@@ -10,6 +10,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .compare import compare
 from .data import Dataset, list_datasets, load_dataset
+from .design import design
 from .errors import ConvergenceWarning, InputError, SupportWarning
 from .evidence import evidence
 from .fit import Fit, fit, load_fit
@@ -30,6 +31,7 @@ __all__ = [
     "PriorSet",
     "SupportWarning",
     "compare",
+    "design",
     "evidence",
     "fit",
     "list_datasets",

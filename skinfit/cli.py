@@ -269,6 +269,9 @@ def build_parser():
     s.add_argument("--jobs", type=int, help="parallel fits (default: one per core)")
     s.add_argument("--dataset", action="append", help="only this shipped dataset (repeatable)")
     s.set_defaults(func=_lazy("skinfit.demo", "cli_demo"))
+    from .design import add_parser as _design_parser
+
+    _design_parser(sub, _lazy)
     return p
 
 

@@ -6,7 +6,7 @@ import skinfit
 def test_public_names():
     assert sorted(skinfit.__all__) == sorted([
         "ConvergenceWarning", "Dataset", "Fit", "InputError", "Model", "PriorSet", "SupportWarning",
-        "compare", "evidence", "fit", "list_datasets", "list_models", "list_priors", "load_dataset", "load_fit",
+        "compare", "design", "evidence", "fit", "list_datasets", "list_models", "list_priors", "load_dataset", "load_fit",
         "load_model", "load_priors"])
     for name in skinfit.__all__:
         assert hasattr(skinfit, name)
