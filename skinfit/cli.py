@@ -100,19 +100,34 @@ def _cmd_fit(args):
     checkpoint = out / "checkpoint.h5"
     if args.resume and not checkpoint.exists():
         print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
+    dataset = _cardless_csv(args)
     with CheckpointLock(checkpoint):
-        result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
+        result = fit(args.model, dataset or args.dataset, priors=args.priors, rng=args.seed, split=split,
                      noise=args.noise, progress=not args.quiet,
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
     path = result.save(out / "fit.nc")
     (out / "summary.csv").write_text(result.summary().to_csv())
     print(result.report_text())
+    if dataset is not None:  # a CSV without a card: its card and a copy beside the result
+        from .data import write_card
+
+        print(f"dataset card (rerun with it: skinfit fit {args.model} {out / 'dataset'}): "
+              f"{write_card(dataset, out / 'dataset')}")
     print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
     if args.strict and result.warnings:  # failed or warned (skinfit.guardrails): result kept, exit 3
         print(f"skinfit: --strict: {len(result.warnings)} guard-rail problem(s), see above", file=sys.stderr)
         return 3
     return 0
+
+
+def _cardless_csv(args):
+    """The Dataset of a CSV named without a card (units in its header), else None."""
+    if Path(args.dataset).suffix.lower() not in (".csv", ".tsv", ".txt"):
+        return None
+    from .data import load_dataset
+
+    return load_dataset(args.dataset, model=args.model)
 
 
 def _lazy(module, function):
@@ -142,7 +157,8 @@ def build_parser():
     s.set_defaults(func=_cmd_datasets)
     s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
     s.add_argument("model", help="model id (models/<id>.toml) or path")
-    s.add_argument("dataset", help="dataset id (datasets/<id>/) or path")
+    s.add_argument("dataset", help="dataset id (datasets/<id>/), its folder or card, or a CSV file with units "
+                   "in its header (normal_force [mN], voltage [V], ...): its card is then written to OUT/dataset/")
     s.add_argument("--out", required=True, help="run directory; fit.nc and summary.csv go there")
     s.add_argument("--priors", help="prior file id or path (default: priors/<model>.toml)")
     s.add_argument("--seed", type=int, default=None, help="seed: the same seed gives identical samples")
