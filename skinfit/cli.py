@@ -123,7 +123,7 @@ def _cmd_fit(args):
 
 def _cardless_csv(args):
     """The Dataset of a CSV named without a card (units in its header), else None."""
-    if Path(args.dataset).suffix.lower() not in (".csv", ".tsv", ".txt"):
+    if Path(args.dataset).suffix.lower() not in (".csv", ".txt"):
         return None
     from .data import load_dataset
 

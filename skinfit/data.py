@@ -1,7 +1,12 @@
-"""Datasets (datasets/<id>/dataset.toml + a CSV): loaded, validated and converted to SI.
+"""Datasets (datasets/<id>/dataset.toml + a CSV, a CSV with units in its header, or a pandas
+DataFrame): loaded, validated and converted to SI.
 
-This is the data boundary: every unit conversion in skinfit happens here, and every problem
-with a user's data is reported with the file, column, row and what was expected.
+This is the data boundary: every unit conversion in skinfit happens here (:mod:`skinfit.units`),
+and every problem with a user's data is reported with the file, column, row and what was
+expected.  Nothing ambiguous is guessed: a row with more or fewer fields than the header, a
+header naming a column twice, two columns read as one name, a unit of the wrong dimension for
+the model are errors.  Only regular files inside the card's folder (or named explicitly) are
+read, up to ``$SKINFIT_MAX_DATA_MB``.
 """
 
 import csv
@@ -184,7 +189,7 @@ def load_dataset(name, *, model=None, units=None, max_bytes=None):
     """
     max_bytes = max_data_bytes() if max_bytes is None else max_bytes
     p = Path(name)
-    if p.suffix.lower() in (".csv", ".txt", ".tsv") or (p.exists() and not p.is_dir() and p.suffix != ".toml"):
+    if p.suffix.lower() in (".csv", ".txt") or (p.exists() and not p.is_dir() and p.suffix != ".toml"):
         return _load_csv(p, model=model, units=units, max_bytes=max_bytes)
     card = find_file("datasets", name)
     doc, text = read_toml(card)
@@ -366,7 +371,7 @@ def as_dataset(data, model=None, units=None):
         return data
     if isinstance(data, pd.DataFrame):
         return from_frame(data, units=units, model=model)
-    if units and Path(data).suffix.lower() not in (".csv", ".txt", ".tsv"):
+    if units and Path(data).suffix.lower() not in (".csv", ".txt"):
         raise InputError("units", "units= applies to a DataFrame or a CSV; a dataset card states its units")
     return load_dataset(data, model=model, units=units)
 
@@ -499,7 +504,7 @@ def _validate(table, columns, where):
     out = {}
     for col in columns:
         text = table[headers[col.header]].astype(str).str.strip()
-        blank = text.eq("") | text.str.lower().isin(["nan", "na", "n/a", "null", "none"])
+        blank = text.eq("") | text.str.lower().isin(["nan", "na", "n/a", "null", "none", "<na>"])
         field = f"column {headers[col.header]!r}"
         if col.kind == "category":
             if blank.any() and not col.optional:
