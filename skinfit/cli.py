@@ -89,9 +89,14 @@ def _cmd_fit(args):
         if args.resume:
             raise InputError("--resume", "not supported with --by yet: resume each group's run directory")
 
-        index = fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
+        dataset = _cardless_csv(args)
+        index = fit_by(args.model, dataset or args.dataset, args.by, out, priors=args.priors, seed=args.seed,
                        split=split, noise=args.noise, progress=not args.quiet,
                        ess_target=args.ess, max_steps=args.max_steps)
+        if dataset is not None:  # a CSV without a card: its card and a copy beside the results
+            from .data import write_card
+
+            print(f"dataset card: {write_card(dataset, out / 'dataset')}")
         print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
         return 0 if index["converged"].all() or not args.strict else 3
     from .checkpoint import CheckpointLock

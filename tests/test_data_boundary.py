@@ -254,3 +254,13 @@ def test_cli_fits_a_csv_without_a_card_and_writes_one_that_reproduces_the_fit(tm
     # the data came in mN: the stored observations are the same numbers / 1000
     np.testing.assert_allclose(a.idata["observed_data"]["tangential_force"].values,
                                load_dataset("electroadhesion_synthetic").frame["tangential_force"], rtol=1e-15)
+
+
+def test_cli_by_group_on_a_csv_without_a_card_writes_its_card(tmp_path, capsys):
+    from skinfit.cli import main
+
+    csv = _ea_csv(tmp_path)
+    assert main(["fit", "electroadhesion", str(csv), "--by", "subject", "--out", str(tmp_path / "g"), "--seed", "2",
+                 "--quiet"]) == 0
+    card = tmp_path / "g" / "dataset" / "dataset.toml"
+    assert load_dataset(str(card.parent)).provenance["sha256"] == hashlib.sha256(csv.read_bytes()).hexdigest()
