@@ -1,27 +1,62 @@
 """Reading the TOML files a researcher edits (model cards, prior files, dataset cards)."""
 
 import hashlib
+import os
+import stat
 import tomllib
 from pathlib import Path
 
 from .errors import InputError
 from .paths import entries, locate
 
-__all__ = ["read_toml", "sha256_file", "require", "find_file"]
+__all__ = ["read_toml", "read_regular", "sha256_file", "require", "find_file"]
 
+#: Largest card or prior file read (bytes): a card is a few kB.
+MAX_TOML_BYTES = 1 << 20
 
 
 def sha256_file(path):
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    """sha256 of a card or prior file (a regular file of at most MAX_TOML_BYTES)."""
+    return hashlib.sha256(read_regular(path, MAX_TOML_BYTES)).hexdigest()
+
+
+def read_regular(path, max_bytes, what="file", where=None):
+    """The bytes of ``path`` if it is a regular file of at most ``max_bytes``; else InputError.
+
+    Checked before opening: a directory, FIFO or device (``/dev/zero``) is refused rather than
+    read without bound or waited on; the read itself stops at ``max_bytes + 1``.
+    """
+    where = path if where is None else where
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(where, f"{what} not found") from None
+    except OSError as exc:
+        raise InputError(where, f"cannot read the {what} ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode)
+                else "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a plain file")
+        raise InputError(where, f"is {kind}, not a regular file (skinfit reads only regular files)")
+    too_big = (f"{what} larger than the limit of {max_bytes / 2**20:.1f} MiB "
+               "(raise it with the SKINFIT_MAX_DATA_MB environment variable or max_bytes=)")
+    if st.st_size > max_bytes:
+        raise InputError(where, f"{st.st_size / 2**20:.1f} MiB: {too_big}")
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise InputError(where, f"cannot read the {what} ({exc.strerror})") from None
+    if len(raw) > max_bytes:
+        raise InputError(where, too_big)
+    return raw
 
 
 def read_toml(path):
     """Parse a TOML file; syntax errors become an InputError naming the file and line."""
     path = Path(path)
+    raw = read_regular(path, MAX_TOML_BYTES)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     try:

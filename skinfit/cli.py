@@ -136,9 +136,14 @@ def _cmd_fit(args):
         if args.resume:
             raise InputError("--resume", "not supported with --by yet: resume each group's run directory")
 
-        index = fit_by(args.model, args.dataset, args.by, out, priors=args.priors, seed=args.seed,
+        dataset = _cardless_csv(args)
+        index = fit_by(args.model, dataset or args.dataset, args.by, out, priors=args.priors, seed=args.seed,
                        split=split, noise=args.noise, progress=not args.quiet,
                        ess_target=args.ess, max_steps=args.max_steps)
+        if dataset is not None:  # a CSV without a card: its card and a copy beside the results
+            from .data import write_card
+
+            print(f"dataset card: {write_card(dataset, out / 'dataset')}", file=sys.stderr if args.json else sys.stdout)
         if args.json:
             print(index.to_json(orient="records", indent=2))
         else:
@@ -155,26 +160,44 @@ def _cmd_fit(args):
     checkpoint = out / "checkpoint.h5"
     if args.resume and not checkpoint.exists():
         print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
+    dataset = _cardless_csv(args)
     with CheckpointLock(checkpoint):
-        result = fit(args.model, args.dataset, priors=args.priors, rng=args.seed, split=split,
+        result = fit(args.model, dataset or args.dataset, priors=args.priors, rng=args.seed, split=split,
                      noise=args.noise, progress=not args.quiet,
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
     path = result.save(out / "fit.nc")
     (out / "summary.csv").write_text(result.summary().to_csv())
+    card = None
+    if dataset is not None:  # a CSV without a card: its card and a copy beside the result
+        from .data import write_card
+
+        card = write_card(dataset, out / "dataset")
     if args.json:
         print(json.dumps({"fit": str(path), "summary_csv": str(out / "summary.csv"), "model": result.model_id,
-                          "dataset": result.dataset_id, "seed": int(result.attrs["seed"]),
+                          "dataset": result.dataset_id, "dataset_card": None if card is None else str(card),
+                          "seed": int(result.attrs["seed"]),
                           "converged": bool(result.converged), "warnings": result.warnings,
                           "summary": json.loads(result.summary().to_json(orient="index")),
                           "seconds": time.perf_counter() - t0}, indent=2, default=str))
     else:
         print(result.report_text())
+        if card is not None:
+            print(f"dataset card (rerun with it: skinfit fit {args.model} {out / 'dataset'}): {card}")
         print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
     if args.strict and result.warnings:  # failed or warned (skinfit.guardrails): result kept, exit 3
         print(f"skinfit: --strict: {len(result.warnings)} guard-rail problem(s), see above", file=sys.stderr)
         return 3
     return 0
+
+
+def _cardless_csv(args):
+    """The Dataset of a CSV named without a card (units in its header), else None."""
+    if Path(args.dataset).suffix.lower() not in (".csv", ".txt"):
+        return None
+    from .data import load_dataset
+
+    return load_dataset(args.dataset, model=args.model)
 
 
 def _lazy(module, function):
@@ -211,7 +234,8 @@ def build_parser():
     s.set_defaults(func=_cmd_datasets)
     s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
     s.add_argument("model", help="model id (models/<id>.toml) or path")
-    s.add_argument("dataset", help="dataset id (datasets/<id>/) or path")
+    s.add_argument("dataset", help="dataset id (datasets/<id>/), its folder or card, or a CSV file with units "
+                   "in its header (normal_force [mN], voltage [V], ...): its card is then written to OUT/dataset/")
     s.add_argument("--out", required=True, help="run directory; fit.nc and summary.csv go there")
     s.add_argument("--priors", help="prior file id or path (default: priors/<model>.toml)")
     s.add_argument("--seed", type=int, default=None, help="seed: the same seed gives identical samples")

@@ -1,11 +1,20 @@
-"""Datasets (datasets/<id>/dataset.toml + a CSV): loaded, validated and converted to SI.
+"""Datasets (datasets/<id>/dataset.toml + a CSV, a CSV with units in its header, or a pandas
+DataFrame): loaded, validated and converted to SI.
 
-This is the data boundary: every unit conversion in skinfit happens here, and every problem
-with a user's data is reported with the file, column, row and what was expected.
+This is the data boundary: every unit conversion in skinfit happens here (:mod:`skinfit.units`),
+and every problem with a user's data is reported with the file, column, row and what was
+expected.  Nothing ambiguous is guessed: a row with more or fewer fields than the header, a
+header naming a column twice, two columns read as one name, a unit of the wrong dimension for
+the model are errors.  Only regular files inside the card's folder (or named explicitly) are
+read, up to ``$SKINFIT_MAX_DATA_MB``.
 """
 
+import csv
 import hashlib
 import io
+import json
+import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -13,12 +22,13 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from ._toml import available, find_file, read_toml, require
+from ._toml import available, find_file, read_regular, read_toml, require
 from .errors import InputError
-from .models import _display
-from .units import NONNEGATIVE, UNITS, dimension, to_si
+from .models import _display, check_id
+from .units import NONNEGATIVE, parse_unit
 
-__all__ = ["Dataset", "load_dataset", "list_datasets", "PROVENANCE_KINDS"]
+__all__ = ["Dataset", "load_dataset", "list_datasets", "from_frame", "as_dataset", "check_units", "write_card",
+           "PROVENANCE_KINDS"]
 
 PROVENANCE_KINDS = ("measured", "digitised", "simulated")
 
@@ -82,6 +92,11 @@ class Dataset:
         return Dataset(f"{self.id}[{label}]", self.title, frame, self.columns, self.groups,
                        self.provenance, self.model, self.path, h.hexdigest())
 
+    @classmethod
+    def from_frame(cls, frame, *, units=None, model=None, id="frame", title=""):
+        """A Dataset from a pandas DataFrame: see :func:`skinfit.data.from_frame`."""
+        return from_frame(frame, units=units, model=model, id=id, title=title)
+
     def __len__(self):
         return len(self.frame)
 
@@ -104,15 +119,31 @@ def _columns(doc, where):
         unit = None
         if kind == "quantity":
             unit = require(spec, "unit", str, where, field_prefix=prefix)
-            if unit not in UNITS:
-                raise InputError(where, f"unknown unit {unit!r} (known: {', '.join(UNITS)})",
-                                 field=prefix + "unit")
+            _unit(unit, where, prefix + "unit")
         cols.append(Column(header, require(spec, "name", str, where, field_prefix=prefix, default=header),
                            unit, kind, require(spec, "optional", bool, where, field_prefix=prefix, default=False),
                            require(spec, "signed", bool, where, field_prefix=prefix, default=False),
                            _missing_when(spec, where, prefix, table), _allowed(spec, where, prefix),
                            require(spec, "positive", bool, where, field_prefix=prefix, default=False)))
+    _unique_names(cols, where)
     return tuple(cols)
+
+
+def _unique_names(cols, where):
+    """Two columns read into one skinfit name would let one overwrite the other: refused."""
+    seen = {}
+    for c in cols:
+        if c.name in seen:
+            raise InputError(where, f"columns {seen[c.name]!r} and {c.header!r} are both read as {c.name!r} "
+                             "(each skinfit name can come from one column only)", field=f"columns.{c.header}.name")
+        seen[c.name] = c.header
+
+
+def _unit(unit, where, field):
+    try:
+        return parse_unit(unit)
+    except ValueError as exc:
+        raise InputError(where, str(exc), field=field) from None
 
 
 def _allowed(spec, where, prefix):
@@ -138,13 +169,33 @@ def _missing_when(spec, where, prefix, table):
     return (column, equals)
 
 
-def load_dataset(name):
-    """Load a dataset by id (``datasets/<id>/``) or by the path of its folder or card."""
+def max_data_bytes():
+    """Largest data file read [bytes]: ``$SKINFIT_MAX_DATA_MB`` MiB, default 64 MiB (~2.5 M rows of
+    four numbers; the pointwise groups of a fit hold draws x rows values each)."""
+    try:
+        return int(float(os.environ.get("SKINFIT_MAX_DATA_MB", 64)) * 2**20)
+    except ValueError:
+        raise InputError("SKINFIT_MAX_DATA_MB", f"expected a number of MiB (got "
+                         f"{os.environ['SKINFIT_MAX_DATA_MB']!r})") from None
+
+
+def load_dataset(name, *, model=None, units=None, max_bytes=None):
+    """Load a dataset by id (``datasets/<id>/``), by the path of its folder or card, or from a
+    CSV file whose header gives the units (``normal_force [mN], voltage [V], ...``).
+
+    ``model`` (a Model or id) and ``units`` (column -> unit, for headers without one) serve a
+    CSV without a card: the model says which columns are quantities, and their units are checked
+    against its card.  A card's data ``file`` must lie inside the card's folder.
+    """
+    max_bytes = max_data_bytes() if max_bytes is None else max_bytes
+    p = Path(name)
+    if p.suffix.lower() in (".csv", ".txt") or (p.exists() and not p.is_dir() and p.suffix != ".toml"):
+        return _load_csv(p, model=model, units=units, max_bytes=max_bytes)
     card = find_file("datasets", name)
     doc, text = read_toml(card)
     where = _display(card)
     columns = _columns(doc, where)
-    data_path = card.parent / require(doc, "file", str, where)
+    data_path = _data_file(card, require(doc, "file", str, where), where)
     groups = tuple(require(doc, "groups", list, where, default=[]))
     by_name = {c.name: c for c in columns}
     for g in groups:
@@ -160,53 +211,319 @@ def load_dataset(name):
             if key not in provenance:
                 raise InputError(where, "simulated data must record its generating parameters and seed",
                                  field=f"provenance.{key}")
-    try:
-        raw = data_path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(where, f"data file {data_path.name!r} not found beside the card", field="file") from None
+    raw = read_regular(data_path, max_bytes, "data file", where=_display(data_path))
+    recorded = provenance.get("sha256")
+    if recorded is not None and recorded != hashlib.sha256(raw).hexdigest():
+        raise InputError(where, f"{data_path.name} is not the file this card was written for (its sha256 "
+                         f"differs from the one recorded)", field="provenance.sha256")
     frame = read_table(raw, columns, _display(data_path))
     digest = hashlib.sha256(text.encode() + b"\0" + raw).hexdigest()
-    return Dataset(id=require(doc, "id", str, where, default=card.parent.name),
-                   title=require(doc, "title", str, where, default=""), frame=frame,
-                   columns=columns, groups=groups, provenance=MappingProxyType(provenance),
-                   model=doc.get("model"), path=where, sha256=digest)
+    ds = Dataset(id=check_id(require(doc, "id", str, where, default=card.parent.name), where),
+                 title=require(doc, "title", str, where, default=""), frame=frame,
+                 columns=columns, groups=groups, provenance=MappingProxyType(provenance),
+                 model=doc.get("model"), path=where, sha256=digest)
+    if model is None and isinstance(ds.model, str):
+        try:
+            model = _as_model(ds.model)
+        except InputError:  # a card naming a model not installed here: checked when fitted
+            model = None
+    if model is not None:
+        check_units(ds, model)
+    return ds
+
+
+def _data_file(card, file, where):
+    """The card's data ``file``, which must name a file inside the card's folder."""
+    folder = card.parent.resolve()
+    path = (folder / file).resolve()
+    if Path(file).is_absolute() or not path.is_relative_to(folder):
+        raise InputError(where, "must name a file inside the dataset's folder (to fit a file elsewhere, "
+                         "pass its path: skinfit fit MODEL path/to/data.csv)", field="file")
+    return path
+
+
+_HEADER = re.compile(r"^(?P<name>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]\s*$")
+
+
+def split_header(header):
+    """``"normal_force [mN]"`` -> ``("normal_force", "mN")``; ``"subject"`` -> ``("subject", None)``."""
+    m = _HEADER.match(header)
+    return (m.group("name").strip(), m.group("unit").strip()) if m else (header.strip(), None)
+
+
+def _columns_from_header(headers, where, model, units):
+    """Columns of a CSV without a card: units from ``name [unit]`` headers or ``units``; columns
+    without a unit are categories, except the model's covariates and observables (an error)."""
+    units = dict(units or {})
+    quantities = set()
+    if model is not None:
+        quantities = {q.name for q in (*model.covariates, *model.observables)}
+    cols, used = [], set()
+    for h in headers:
+        name, unit = split_header(h)
+        for key in (h, name):
+            if key in units:
+                if unit is not None and units[key] != unit:
+                    raise InputError(where, f"the header says [{unit}] and units= says {units[key]!r}: "
+                                     "give one", field=f"column {h!r}")
+                unit = units[key]
+                used.add(key)
+        if unit is not None:
+            _unit(unit, where, f"column {h!r}")
+            cols.append(Column(h, name, unit, "quantity"))
+        elif name in quantities:
+            raise InputError(where, f"no unit for {name!r}, which model {model.id!r} needs as a quantity: write "
+                             f"'{name} [unit]' in the header (e.g. [{_example_unit(model, name)}]) or pass "
+                             f"units={{{name!r}: ...}}", field=f"column {h!r}")
+        else:
+            cols.append(Column(h, name, None, "category"))
+    unknown = set(units) - used
+    if unknown:
+        raise InputError(where, f"units= names columns the file does not have: {sorted(unknown)}")
+    if model is not None:
+        missing = [q.name for q in (*model.covariates, *model.observables[:1])
+                   if not q.optional and q.name not in {c.name for c in cols}]
+        if missing:
+            raise InputError(where, f"model {model.id!r} needs a column {missing[0]!r} "
+                             f"[{_example_unit(model, missing[0])}] (the file has "
+                             f"{', '.join(_quote_headers(headers))})", field=f"column {missing[0]!r}")
+    _unique_names(cols, where)
+    return tuple(cols)
+
+
+def _example_unit(model, name):
+    return next(q.unit for q in (*model.covariates, *model.observables) if q.name == name)
+
+
+def _as_model(model):
+    if model is None or not isinstance(model, str):
+        return model
+    from .models import load_model
+
+    return load_model(model)
+
+
+def _load_csv(path, *, model=None, units=None, max_bytes=None):
+    """A dataset from a CSV file with units in its header and no card."""
+    model = _as_model(model)
+    where = _display(path)
+    raw = read_regular(path, max_data_bytes() if max_bytes is None else max_bytes, "data file", where=where)
+    headers, _ = _split_csv(raw, where)
+    columns = _columns_from_header(headers, where, model, units)
+    frame = read_table(raw, columns, where)
+    sha = hashlib.sha256(raw).hexdigest()
+    provenance = {"kind": "measured", "note": "read from a CSV without a dataset card (kind assumed)",
+                  "source_file": str(Path(path).resolve()), "sha256": sha}
+    ident = re.sub(r"[^A-Za-z0-9_.+-]", "_", Path(path).stem).lstrip(".") or "data"
+    digest = hashlib.sha256(json.dumps([[c.header, c.name, c.unit] for c in columns]).encode() + b"\0"
+                            + raw).hexdigest()
+    ds = Dataset(id=ident, title=f"{Path(path).name} (no card)", frame=frame, columns=columns,
+                 groups=tuple(c.name for c in columns if c.kind == "category"),
+                 provenance=MappingProxyType(provenance), model=getattr(model, "id", None), path=where,
+                 sha256=digest)
+    if model is not None:
+        check_units(ds, model)
+    return ds
+
+
+def from_frame(frame, *, units=None, model=None, id="frame", title=""):
+    """A Dataset from a pandas DataFrame, validated as a CSV is: column names may carry their
+    unit (``"normal_force [mN]"``) or ``units`` gives it (column -> unit); values converted to SI."""
+    if not isinstance(frame, pd.DataFrame):
+        raise InputError("DataFrame", f"expected a pandas DataFrame (got {type(frame).__name__})")
+    model = _as_model(model)
+    where = f"DataFrame {id!r}"
+    check_id(id, where, field="id")
+    headers = [str(c) for c in frame.columns]
+    if len(set(headers)) != len(headers):
+        dup = next(h for h in headers if headers.count(h) > 1)
+        raise InputError(where, "column name appears twice", field=f"column {dup!r}")
+    if len(frame) == 0:
+        raise InputError(where, "no data rows")
+    columns = _columns_from_header(headers, where, model, units)
+    table = {}
+    for h, (_, col) in zip(headers, frame.items()):
+        if pd.api.types.is_numeric_dtype(col.dtype) and not pd.api.types.is_bool_dtype(col.dtype):
+            values = col.to_numpy(dtype=float, na_value=np.nan)
+            table[h] = pd.Series([repr(float(v)) for v in values], dtype=object)
+        else:
+            table[h] = pd.Series(["" if v is None or (isinstance(v, float) and np.isnan(v)) else str(v)
+                                  for v in col.to_numpy(dtype=object)], dtype=object)
+    out = _validate(pd.DataFrame(table), columns, where)
+    h = hashlib.sha256(json.dumps([[c.header, c.name, c.unit] for c in columns]).encode())
+    for name in out.columns:
+        h.update(name.encode() + b"\0" + (out[name].to_numpy().tobytes() if out[name].dtype.kind == "f"
+                                           else "\0".join(map(str, out[name])).encode()))
+    ds = Dataset(id=id, title=title, frame=out, columns=columns,
+                 groups=tuple(c.name for c in columns if c.kind == "category"),
+                 provenance=MappingProxyType({"kind": "measured", "note": "from a pandas DataFrame"}),
+                 model=getattr(model, "id", None), path=where, sha256=h.hexdigest())
+    if model is not None:
+        check_units(ds, model)
+    return ds
+
+
+def as_dataset(data, model=None, units=None):
+    """A Dataset from a Dataset, a DataFrame, a CSV path, a dataset id or card path."""
+    if isinstance(data, Dataset):
+        if units:
+            raise InputError("units", "units= applies to a DataFrame or a CSV, not to a loaded Dataset")
+        return data
+    if isinstance(data, pd.DataFrame):
+        return from_frame(data, units=units, model=model)
+    if units and Path(data).suffix.lower() not in (".csv", ".txt"):
+        raise InputError("units", "units= applies to a DataFrame or a CSV; a dataset card states its units")
+    return load_dataset(data, model=model, units=units)
+
+
+def check_units(dataset, model):
+    """Every model covariate and observable present in ``dataset`` has a unit of the dimension
+    the model card states (a force in mm or a dimensionless force is refused, naming the column)."""
+    model = _as_model(model)
+    for q in (*model.covariates, *model.observables):
+        for c in dataset.columns:
+            if c.name != q.name:
+                continue
+            field = f"column {c.header!r}"
+            if c.kind != "quantity":
+                raise InputError(dataset.path, f"is declared a category, model {model.id!r} needs a quantity "
+                                 f"in {q.unit}", field=field)
+            expected = parse_unit(q.unit)
+            got = _unit(c.unit, dataset.path, field)
+            if got.dims != expected.dims:
+                raise InputError(dataset.path, f"unit {c.unit!r} is a {got.name}; model {model.id!r} needs "
+                                 f"{q.name} as a {expected.name} (e.g. {q.unit})", field=field)
+
+
+def write_card(dataset, folder, data_name="data.csv"):
+    """Write ``dataset`` as a dataset folder (``dataset.toml`` + the data in SI units is NOT
+    written: the original CSV is copied) so that a fit made without a card can be rerun.
+
+    Only for datasets read from a CSV without a card (their provenance names the source file).
+    Returns the card's path.
+    """
+    import shutil
+
+    src = dataset.provenance.get("source_file")
+    if not src:
+        raise InputError(dataset.path, "only a dataset read from a CSV file can be written as a card")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(src, folder / data_name)
+    lines = ["schema_version = 1", f"id = {json.dumps(dataset.id)}",
+             f"title = {json.dumps(dataset.title.replace(' (no card)', ''))}"]
+    if dataset.model:
+        lines.append(f"model = {json.dumps(dataset.model)}")
+    lines += [f"file = {json.dumps(data_name)}", f"groups = {json.dumps(list(dataset.groups))}", "",
+              "[provenance]"]
+    lines += [f"{k} = {json.dumps(v)}" for k, v in dataset.provenance.items()]
+    for c in dataset.columns:
+        lines += ["", f"[columns.{json.dumps(c.header)}]", f"name = {json.dumps(c.name)}"]
+        lines.append(f"unit = {json.dumps(c.unit)}" if c.unit else 'kind = "category"')
+    path = folder / "dataset.toml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def _quote_headers(headers):
+    """Header cells as they may appear in a message: names only (never a line of some other file)."""
+    ok = [h for h in headers if re.fullmatch(r"[\w .,+\-/*^()\[\]%µμ]{1,48}", h)]
+    return [repr(h) for h in ok] if len(ok) == len(headers) else [f"{len(headers)} header fields"]
+
+
+def _split_csv(raw, where):
+    """Header and rows of CSV bytes; every row must have exactly the header's fields."""
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(where, f"not UTF-8 text (invalid byte at offset {exc.start})") from None
+    if "\0" in text:
+        raise InputError(where, "holds NUL bytes: not a text (CSV) file")
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text, newline=""), skipinitialspace=True) if r]
+    except csv.Error as exc:
+        raise InputError(where, f"not a readable CSV file ({exc})") from None
+    if not rows:
+        raise InputError(where, "the file is empty (expected a header row and data rows)")
+    header = [h.strip() for h in rows[0]]
+    for j, h in enumerate(header):
+        if not h:
+            raise InputError(where, f"header field {j + 1} is empty (every column needs a name)", field="header")
+        if header.index(h) != j:
+            raise InputError(where, f"the header names this column twice (fields {header.index(h) + 1} and "
+                             f"{j + 1}): which one is meant is ambiguous", field=f"column {h!r}")
+    names = [split_header(h)[0] for h in header]
+    for j, h in enumerate(names):
+        if names.index(h) != j:
+            raise InputError(where, f"two header fields name column {h!r} ({header[names.index(h)]!r} and "
+                             f"{header[j]!r}): which one is meant is ambiguous", field=f"column {h!r}")
+    n = len(header)
+    for i, r in enumerate(rows[1:]):
+        if len(r) != n:
+            extra = (f"; field {n + 1} on is beyond the header (a decimal comma in a comma-separated file? "
+                     "write 0.5, not 0,5, or quote the value)" if len(r) > n else "")
+            raise InputError(where, f"{len(r)} fields where the header has {n}{extra}", row=i + 1,
+                             field=f"column {n + 1}" if len(r) > n else f"column {len(r) + 1}")
+    return header, rows[1:]
 
 
 def read_table(raw, columns, where):
     """Parse CSV bytes against the declared columns; returns the SI frame."""
-    try:
-        table = pd.read_csv(io.BytesIO(raw), dtype=str, keep_default_na=False, skipinitialspace=True)
-    except pd.errors.EmptyDataError:
-        raise InputError(where, "the file is empty (expected a header row and data rows)") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise InputError(where, f"not a readable CSV file ({str(exc).strip()})") from None
-    if len(table) == 0:
+    header, rows = _split_csv(raw, where)
+    if not rows:
         raise InputError(where, "no data rows (expected at least one row below the header)")
+    table = pd.DataFrame({h: pd.Series(v, dtype=object) for h, v in zip(header, zip(*rows))})
+    return _validate(table, columns, where)
+
+
+def _match(columns, table, where):
+    """CSV header of each declared column: the card's key equals the header, or its name part
+    (``normal_force`` matches ``normal_force [mN]``, whose unit must then agree with the card's)."""
+    names = {split_header(h)[0]: h for h in table.columns}
     out = {}
     for col in columns:
-        if col.header not in table.columns:
+        h = col.header if col.header in table.columns else names.get(col.header)
+        if h is None:
             raise InputError(where, f"missing column (the card declares it; the file has "
-                             f"{', '.join(map(repr, table.columns))})", field=f"column {col.header!r}")
-        text = table[col.header].str.strip()
-        blank = text.eq("") | text.str.lower().isin(["nan", "na", "n/a", "null", "none"])
-        field = f"column {col.header!r}"
+                             f"{', '.join(_quote_headers(list(table.columns)))})", field=f"column {col.header!r}")
+        unit = split_header(h)[1]
+        if unit is not None and col.unit is not None and h != col.header and unit != col.unit:
+            raise InputError(where, f"the header says [{unit}], the card says {col.unit!r}: which is meant "
+                             "is ambiguous", field=f"column {h!r}")
+        out[col.header] = h
+    return out
+
+
+def _shown(text):
+    return repr(text if len(text) <= 24 else text[:21] + "...")
+
+
+def _validate(table, columns, where):
+    """Check each declared column of a table of strings (as read) and convert it to SI."""
+    headers = _match(columns, table, where)
+    out = {}
+    for col in columns:
+        text = table[headers[col.header]].astype(str).str.strip()
+        blank = text.eq("") | text.str.lower().isin(["nan", "na", "n/a", "null", "none", "<na>"])
+        field = f"column {headers[col.header]!r}"
         if col.kind == "category":
             if blank.any() and not col.optional:
                 raise InputError(where, "empty group label (expected a name for every row)",
                                  field=field, row=int(np.argmax(blank.to_numpy())) + 1)
             out[col.name] = text.astype(object)
             continue
+        unit = parse_unit(col.unit)
         values = pd.to_numeric(text.where(~blank, "nan"), errors="coerce").to_numpy(dtype=float)
         bad = np.isnan(values) & ~blank.to_numpy()
         if bad.any():
             i = int(np.argmax(bad))
-            raise InputError(where, f"expected a number in {col.unit} (got {text.iloc[i]!r})",
+            raise InputError(where, f"expected a number in {col.unit} (got {_shown(text.iloc[i])})",
                              field=field, row=i + 1)
         if col.missing_when:
             other, label = col.missing_when
-            if other not in table.columns:
+            if other not in headers:
                 raise InputError(where, "missing column (the card declares it)", field=f"column {other!r}")
-            by_design = (table[other].str.strip() == label).to_numpy()
+            by_design = (table[headers[other]].astype(str).str.strip() == label).to_numpy()
             absent = np.isnan(values)
             if (absent & ~by_design).any():
                 i = int(np.argmax(absent & ~by_design))
@@ -215,15 +532,15 @@ def read_table(raw, columns, where):
             if (~absent & by_design).any():
                 i = int(np.argmax(~absent & by_design))
                 raise InputError(where, f"expected no value on a row with {other} = {label!r} (missing "
-                                 f"by design; got {text.iloc[i]!r})", field=field, row=i + 1)
+                                 f"by design; got {_shown(text.iloc[i])})", field=field, row=i + 1)
         elif np.isnan(values).any() and not col.optional:
             i = int(np.argmax(np.isnan(values)))
             raise InputError(where, f"missing value (expected a number in {col.unit}; declare "
                              f"`optional = true` if it is missing by design)", field=field, row=i + 1)
         if np.isinf(values).any():
             i = int(np.argmax(np.isinf(values)))
-            raise InputError(where, f"expected a finite number (got {text.iloc[i]!r})", field=field, row=i + 1)
-        dim = dimension(col.unit)
+            raise InputError(where, f"expected a finite number (got {_shown(text.iloc[i])})", field=field, row=i + 1)
+        dim = unit.name
         if dim in NONNEGATIVE and not col.signed and (values < 0).any():
             i = int(np.argmax(values < 0))
             raise InputError(where, f"expected a {dim} >= 0 (got {values[i]:g} {col.unit}; declare "
@@ -235,8 +552,12 @@ def read_table(raw, columns, where):
         if col.allowed and (present & ~np.isin(values, col.allowed)).any():
             i = int(np.argmax(present & ~np.isin(values, col.allowed)))
             raise InputError(where, f"expected one of {', '.join(f'{v:g}' for v in col.allowed)} "
-                             f"(got {text.iloc[i]!r})", field=field, row=i + 1)
-        out[col.name] = values * to_si(col.unit)
+                             f"(got {_shown(text.iloc[i])})", field=field, row=i + 1)
+        si = values * unit.factor
+        if not np.isfinite(si[present]).all():
+            i = int(np.argmax(present & ~np.isfinite(si)))
+            raise InputError(where, f"{text.iloc[i]} {col.unit} overflows in SI units", field=field, row=i + 1)
+        out[col.name] = si
     return pd.DataFrame(out)
 
 

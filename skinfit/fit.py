@@ -22,7 +22,9 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from .data import Dataset, load_dataset
+from .data import Dataset, as_dataset
+from .labels import annotate
+from .units import si_unit
 from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
 from .optimize import find_map, laplace_covariance
@@ -53,7 +55,7 @@ def as_generator(rng):
     raise TypeError(f"rng must be an int seed, None or numpy.random.Generator (got {type(rng).__name__})")
 
 
-def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, constants=None,
+def fit(model, dataset, priors=None, *, units=None, rng=None, split=None, noise=None, constants=None,
         nwalkers=None, ess_target=400, max_steps=20000, progress=False, strict=False,
         n_global=2000, n_local=4, n_prior_draws=2000, checkpoint=None, resume=False,
         checkpoint_every=30.0):
@@ -63,8 +65,11 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     ----------
     model : Model or str
         A model or a model id (``models/<id>.toml``).
-    dataset : Dataset or str
-        A dataset or dataset id / path.
+    dataset : Dataset, pandas.DataFrame or str
+        A dataset, a dataset id / card path, a CSV path with units in its header
+        (``normal_force [mN]``), or a DataFrame (:func:`skinfit.data.from_frame`).
+    units : mapping column -> unit, optional
+        Units of DataFrame or CSV columns whose name does not carry one (``{"voltage": "V"}``).
     priors : PriorSet or str, optional
         Default: ``priors/<model id>.toml``.
     rng : int, None or numpy.random.Generator
@@ -109,7 +114,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     """
     t_start = time.perf_counter()
     model = model if isinstance(model, Model) else load_model(model)
-    dataset = dataset if isinstance(dataset, Dataset) else load_dataset(dataset)
+    dataset = as_dataset(dataset, model=model, units=units)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
     seed_drawn = rng is None
     if seed_drawn and resume and checkpoint is not None and Path(checkpoint).exists():
@@ -228,7 +233,8 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
         "priors_id": post.priors.id, "priors_sha256": post.priors.sha256, "priors_text": post.priors.text,
         "dataset_id": ds.id, "dataset_sha256": ds.sha256, "dataset_path": ds.path,
         "dataset_provenance": json.dumps(dict(ds.provenance), default=str),
-        "units": json.dumps({c.name: c.unit for c in ds.columns if c.unit}),
+        "units": json.dumps({c.name: si_unit(c.unit) for c in ds.columns if c.unit}),  # of the stored values
+        "data_units": json.dumps({c.name: c.unit for c in ds.columns if c.unit}),  # as the data came in
         "setup": json.dumps({**post.describe(), "constants": post.constants}),
         "slots": json.dumps([{"name": s.name, "base": s.base, "level": s.level, "transform": s.transform}
                              for s in post.slots]),
@@ -255,7 +261,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
                          "observed_data": observed, "constant_data": constant,
                          **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
                         dims=dims, coords=coords, attrs={"/": attrs})
-    return tree, deferred
+    return annotate(tree, post), deferred
 
 
 @dataclass(frozen=True)
@@ -371,7 +377,7 @@ class Fit:
         if self._deferred is None:
             return self
         t0 = time.perf_counter()
-        tree, extra = self._tree, self._deferred.groups(self.posterior)
+        tree, extra = self._tree, annotate(self._deferred.groups(self.posterior), self.posterior)
         nodes = {n: tree[n] for n in tree.children} | {n: extra[n] for n in extra.children}
         tree = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
                                      | {n: nodes[n].to_dataset(inherit=False) for n in sorted(nodes, key=GROUPS.index)})
@@ -428,7 +434,7 @@ class Fit:
 
     # ---- tables -------------------------------------------------------------------------
     def summary(self):
-        """Per parameter: mean, sd, 3%/97% HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
+        """Per parameter: its SI unit, mean, sd, 3%/97% HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
 
         ``contraction`` is 1 - var_posterior / var_prior, in the sampling coordinate (log for
         positive parameters): near 1 the data determined the parameter; below 0.5 the
@@ -465,8 +471,18 @@ class Fit:
         table["contraction"] = contraction
         table["note"] = notes
         table = pd.concat([table, _derived_summary(self._tree)])
-        return table[["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
+        table["unit"] = [self._unit(n) for n in table.index]
+        return table[["unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
                       "contraction", "note"]]
+
+    def _unit(self, name):
+        """SI unit of a summary row (``E_star``, ``alpha[75]``, a derived quantity), from the
+        ``units`` attr of its variable in the tree ('' for fits saved without them)."""
+        base = name.split("[")[0]
+        for group in ("posterior", "derived"):
+            if group in self._tree.children and base in self._tree[group].data_vars:
+                return self._tree[group][base].attrs.get("units", "")
+        return ""
 
     def diagnostics(self):
         """Sampler, optimiser and support diagnostics as one dict."""
@@ -597,7 +613,7 @@ def rebuild_posterior(tree):
                       priors=MappingProxyType(_priors_from_attrs(attrs)), path="saved priors",
                       sha256=attrs["priors_sha256"], text=attrs["priors_text"])
     setup = json.loads(attrs["setup"])
-    units = json.loads(attrs["units"])
+    units = json.loads(attrs.get("data_units", attrs["units"]))  # the split levels' labels use them
     cd = tree["constant_data"].to_dataset()
     od = tree["observed_data"].to_dataset()
     frame = pd.DataFrame({c: cd[c].values for c in cd.data_vars} | {o: od[o].values for o in od.data_vars})

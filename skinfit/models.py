@@ -1,12 +1,13 @@
-"""Model cards (models/<id>.toml) and the registry of forward functions.
+"""Model cards (models/<id>.toml): validated at load time into frozen Model objects.
 
-A card names its forward function as ``module:function``; only functions listed in the
-``__all__`` of a module of :mod:`skinfit.physics` can be named (nothing in a card is
-evaluated as code).
+A card names its forward function (and ``[sampling]`` / ``[derived]`` functions) as
+``module:function`` or a registered name; only functions registered for that role in
+:mod:`skinfit.registry` can be named (nothing in a card is evaluated as code).  Units on a
+card are SI (:func:`skinfit.units.check_model_unit`).
 """
 
-import importlib
 import math
+import re
 import warnings
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -15,8 +16,10 @@ import numpy as np
 
 from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError, SupportWarning
+from .registry import resolve
+from .units import check_model_unit
 
-__all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "NOISE_MODELS"]
+__all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "check_id", "NOISE_MODELS"]
 
 NOISE_MODELS = ("normal", "student_t", "lognormal")
 
@@ -33,20 +36,21 @@ class Quantity:
     physical: tuple = (-math.inf, math.inf)  # parameters only: the range the physics allows
 
 
-def resolve_forward(ref, where="forward"):
-    """Look up ``"skinfit.physics.<module>:<function>"`` in the physics registry."""
-    module_name, _, func_name = ref.partition(":")
-    if not module_name.startswith("skinfit.physics.") or not func_name:
-        raise InputError(where, f"expected 'skinfit.physics.<module>:<function>' (got {ref!r})",
-                         field="forward")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError:
-        raise InputError(where, f"no physics module {module_name!r}", field="forward") from None
-    if func_name not in getattr(module, "__all__", ()):
-        raise InputError(where, f"{module_name} exports no model function {func_name!r} "
-                         f"(available: {', '.join(getattr(module, '__all__', ()))})", field="forward")
-    return getattr(module, func_name)
+def resolve_forward(ref, where="forward", role="forward"):
+    """The function a card names for ``role`` (forward, shear, shift, derived), looked up in
+    :mod:`skinfit.registry`; InputError naming ``where`` if it is not registered for that role."""
+    return resolve(role, ref, where)
+
+
+_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,127}")
+
+
+def check_id(value, where, field="id"):
+    """An id is a name (it becomes a folder or file name): letters, digits, ``_ . + -``, no path."""
+    if not isinstance(value, str) or not _ID.fullmatch(value) or ".." in value:
+        raise InputError(where, f"expected a name of letters, digits, '_', '.', '+', '-' (no '/', '..' or "
+                         f"spaces; it names files and folders) (got {value!r})", field=field)
+    return value
 
 
 @dataclass(frozen=True)
@@ -77,7 +81,7 @@ class Model:
 
     @property
     def forward(self):
-        return _forward_cached(self.forward_ref, self.path)
+        return resolve("forward", self.forward_ref, self.path)
 
     @property
     def parameter_names(self):
@@ -105,7 +109,7 @@ class Model:
     def derive(self, params, covariates, constants=None):
         """Derived quantities of the card's ``[derived]`` table: dict name -> array (k, n)."""
         c = {**self.constants, **(constants or {})}
-        out = _forward_cached(self.derived["function"], self.path)(params, covariates, c)
+        out = resolve("derived", self.derived["function"], self.path)(params, covariates, c)
         if set(out) != set(self.derived["quantities"]):
             raise InputError(self.path, f"{self.derived['function']} returns {sorted(out)}, the card "
                              f"declares {sorted(self.derived['quantities'])}", field="derived.quantities")
@@ -170,6 +174,9 @@ def _quantities(doc, key, where, *, observable=False):
             raise InputError(where, "expected a table", field=f"{key}[{i}]")
         name = require(item, "name", str, where, field_prefix=prefix)
         unit = require(item, "unit", str, where, field_prefix=prefix)
+        reason = check_model_unit(unit)
+        if reason:
+            raise InputError(where, f"unknown unit {unit!r}: {reason}", field=prefix + "unit")
         desc = require(item, "description", str, where, field_prefix=prefix, default="")
         noise = None
         if observable:
@@ -233,6 +240,10 @@ def _parse_model_text(text, where, digest):
         if isinstance(spec, dict):
             value = require(spec, "value", float, where, field_prefix=f"constants.{cname}.")
             sources[cname] = spec.get("source", "")
+            unit = require(spec, "unit", str, where, field_prefix=f"constants.{cname}.", default="1")
+            reason = check_model_unit(unit)
+            if reason:
+                raise InputError(where, f"unknown unit {unit!r}: {reason}", field=f"constants.{cname}.unit")
         elif isinstance(spec, (int, float)) and not isinstance(spec, bool):
             value = float(spec)
         else:
@@ -241,7 +252,7 @@ def _parse_model_text(text, where, digest):
         constants[cname] = value
     sampling = require(doc, "sampling", dict, where, default={})
     model = Model(
-        id=require(doc, "id", str, where),
+        id=check_id(require(doc, "id", str, where), where),
         title=require(doc, "title", str, where),
         source=require(doc, "source", str, where),
         forward_ref=require(doc, "forward", str, where),
@@ -267,7 +278,7 @@ def _parse_model_text(text, where, digest):
     )
     if not model.observables:
         raise InputError(where, "a model needs at least one observable", field="observables")
-    resolve_forward(model.forward_ref, where)
+    resolve("forward", model.forward_ref, where)
     for pname, col in model.split.items():
         if pname not in model.parameter_names:
             raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
@@ -277,9 +288,9 @@ def _parse_model_text(text, where, digest):
     for kind, table in (("shear", model.shear), ("shift", model.shift)):
         for pname, ref in table.items():
             if pname not in model.parameter_names or not isinstance(ref, str):
-                raise InputError(where, f"expected parameter = 'skinfit.physics.<module>:<function>' "
-                                 f"(got {pname} = {ref!r})", field=f"sampling.{kind}.{pname}")
-            resolve_forward(ref, where)
+                raise InputError(where, f"expected parameter = 'module:function' of a registered {kind} "
+                                 f"function (got {pname} = {ref!r})", field=f"sampling.{kind}.{pname}")
+            resolve(kind, ref, where, field=f"sampling.{kind}.{pname}")
     _check_products(model, where)
     declared = [set(model.shear), set(model.shift), set(model.product), set(model.linear)]
     for i, a in enumerate(declared):
@@ -316,7 +327,7 @@ def _derived_table(doc, where):
     if not table:
         return MappingProxyType({})
     ref = require(table, "function", str, where, field_prefix="derived.")
-    resolve_forward(ref, where)
+    resolve("derived", ref, where)
     quantities = require(table, "quantities", dict, where, field_prefix="derived.")
     over = require(table, "over", list, where, field_prefix="derived.", default=[])
     return MappingProxyType({"function": ref, "over": tuple(over),
@@ -332,11 +343,3 @@ def _display(path):
 def list_models():
     return sorted(available("models"))
 
-
-_FORWARD = {}
-
-
-def _forward_cached(ref, where):
-    if ref not in _FORWARD:
-        _FORWARD[ref] = resolve_forward(ref, where)
-    return _FORWARD[ref]

@@ -2,7 +2,8 @@
 
 A search path of folders, first match wins: folders given explicitly (``skinfit --path DIR``,
 :func:`set_search_path`) > the folders in ``$SKINFIT_PATH`` (``os.pathsep``-separated) > the
-user folder (``platformdirs.user_data_dir("skinfit")``) > the files shipped with skinfit. Each
+user folder (``platformdirs.user_data_dir("skinfit")``) > the card folders of installed plug-ins
+(``skinfit.models`` entry points, :mod:`skinfit.registry`) > the files shipped with skinfit. Each
 folder holds the repository's layout: ``models/<id>.toml``, ``priors/<id>.toml``,
 ``datasets/<id>/dataset.toml``; a missing sub-folder is skipped.
 
@@ -75,6 +76,9 @@ def search_path() -> list[Root]:
     roots = [Root(p, "--path") for p in _EXPLICIT]
     roots += [Root(Path(p).expanduser(), f"${ENV}") for p in os.environ.get(ENV, "").split(os.pathsep) if p]
     roots.append(Root(user_root(), "user"))
+    from .registry import plugin_folders  # card folders of installed plug-ins (skinfit.models entry points)
+
+    roots += [Root(Path(p), "plug-in") for p in plugin_folders()]
     shipped = shipped_root()
     if shipped is not None:
         roots.append(Root(shipped, "shipped"))
@@ -113,6 +117,8 @@ def locate(kind: str, name) -> Path:
         return p / "dataset.toml"
     if p.suffix == ".toml" and p.is_file():
         return p
+    if any(c in str(name) for c in "/\\") or ".." in str(name) or str(name).startswith("."):
+        raise InputError(str(name), f"no such {kind[:-1]} file, and an id is a name, not a path")
     entry = entries(kind).get(str(name))
     if entry is not None:
         return entry.path

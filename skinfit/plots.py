@@ -46,7 +46,7 @@ from matplotlib.patches import Patch
 
 from .errors import InputError
 from .posterior import noise_suffix
-from .units import UNITS, to_si
+from .units import to_si
 
 __all__ = ["plot_ppc", "ppc_bands", "plot_spec", "plot_pair", "plot_trace", "plot_rank",
            "plot_prior_posterior", "plot_forest", "plot_comparison", "parameter_units", "axis_label"]
@@ -93,13 +93,16 @@ def _data_units(fit):
     """Column -> unit the data came in (dataset card), falling back to the model card's SI unit."""
     card = _card(fit)
     units = {q["name"]: q["unit"] for key in ("observables", "covariates") for q in card.get(key, [])}
-    units.update(fit.attr("units"))
+    units.update(fit.attr("data_units") if "data_units" in fit.attrs else fit.attr("units"))
     return units
 
 
 def _factor(unit):
     """Factor from SI to ``unit`` (divide SI values by it); 1 for units skinfit does not convert."""
-    return to_si(unit) if unit in UNITS else 1.0
+    try:
+        return to_si(unit)
+    except ValueError:  # a symbolic model unit such as N^n_z
+        return 1.0
 
 
 def axis_label(name, unit=None):

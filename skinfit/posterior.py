@@ -14,7 +14,9 @@ from scipy import special
 from .units import to_si
 
 from .errors import InputError
+from .data import check_units
 from .models import NOISE_MODELS, resolve_forward as _resolve
+from .priors import check_priors_for
 from .priors import _LOGPDF
 
 __all__ = ["Posterior", "Slot", "noise_parameter_names"]
@@ -113,6 +115,8 @@ class Posterior:
     def __init__(self, model, priors, dataset, *, split=None, noise=None, constants=None):
         self.model, self.priors, self.dataset = model, priors, dataset
         where = f"fit of {model.id} on {dataset.id}"
+        check_priors_for(priors, model)
+        check_units(dataset, model)
         frame = dataset.frame
         self.observables = tuple(o.name for o in model.observables if o.name in frame.columns)
         if not self.observables:
@@ -253,7 +257,7 @@ class Posterior:
         shared = {p: j for p, j in self._param_index.items() if isinstance(j, int)}
         shift = np.zeros(len(slots))
         for pname, ref in model.shift.items():
-            c = float(_resolve(ref)(self.constants))
+            c = float(_resolve(ref, model.path, "shift")(self.constants))
             for j, slot in enumerate(slots):
                 if slot.base == pname and slot.transform == "log" and c > 0 and slot.lo + c > 0:
                     slots[j] = replace(slot, transform="shift_log")
@@ -270,7 +274,7 @@ class Posterior:
         self._shifted = np.flatnonzero(shift)
         self._shift = shift[self._shifted]  # theta = c*expm1(z - log c): exactly 0 at z = log c
         self._log_shift = np.log(self._shift)
-        self._shear = tuple((j, _resolve(ref)) for pname, ref in model.shear.items()
+        self._shear = tuple((j, _resolve(ref, model.path, "shear")) for pname, ref in model.shear.items()
                             if (j := shared.get(pname)) is not None and slots[j].transform == "log")
         self._sheared = {slots[j].base for j, _ in self._shear}
         return tuple(slots)

@@ -15,10 +15,10 @@ from scipy import special, stats
 
 from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError
-from .models import _display
+from .models import _display, check_id
 from .references import check_source
 
-__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "DISTRIBUTIONS"]
+__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS"]
 
 # name -> (required arguments, factory(args, lo, hi) -> frozen scipy distribution)
 DISTRIBUTIONS = {
@@ -200,12 +200,21 @@ def parse_prior(name, spec, where):
     return prior
 
 
+def check_priors_for(priors, model):
+    """A prior file serves the model its ``model`` field names, and no other."""
+    if priors.model != model.id:
+        raise InputError(priors.path or priors.id, f"is a prior file for model {priors.model!r}, not for "
+                         f"{model.id!r} (copy it and set model = {model.id!r} if it applies)", field="model")
+
+
 def load_priors(name):
     """Load a prior file by id (``priors/<id>.toml``) or by path."""
     path = find_file("priors", name)
     doc, text = read_toml(path)
     where = _display(path)
-    model = require(doc, "model", str, where)
+    model = check_id(require(doc, "model", str, where), where, field="model")
+    if "id" in doc:
+        check_id(doc["id"], where)
     priors = {}
     for key, spec in doc.items():
         if key in ("schema_version", "model", "id"):

@@ -270,7 +270,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
         summary.to_csv(out / f"{key}_summary.csv")
         diag.to_csv(out / f"{key}_diagnostics.csv")
         units = plots.parameter_units(fit)
-        shown = summary.copy()
+        shown = summary.drop(columns="unit", errors="ignore")
         shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
         where = f"{fit.model_id} on {fit.dataset_id}"
         figures = []

@@ -65,9 +65,17 @@ def test_missing_column(ds_dir):
 
 
 def test_unknown_unit(ds_dir):
-    card = (ds_dir / "dataset.toml").read_text().replace('unit = "mN"', 'unit = "grams"', 1)
-    (ds_dir / "dataset.toml").write_text(card)
-    with pytest.raises(skinfit.InputError, match=r"dataset.toml: columns.normal_force.unit: unknown unit 'grams'"):
+    card = (ds_dir / "dataset.toml").read_text()
+    (ds_dir / "dataset.toml").write_text(card.replace('unit = "mN"', 'unit = "blorgs"', 1))
+    with pytest.raises(skinfit.InputError, match=r"dataset.toml: columns.normal_force.unit: unknown unit 'blorgs'"):
+        load_dataset(str(ds_dir))
+
+
+def test_unit_of_the_wrong_dimension_for_the_cards_model(ds_dir):
+    card = (ds_dir / "dataset.toml").read_text()
+    (ds_dir / "dataset.toml").write_text(card.replace('unit = "mN"', 'unit = "grams"', 1))
+    with pytest.raises(skinfit.InputError, match=r"dataset.toml: column 'normal_force': unit 'grams' is a "
+                       r"\[mass\]; model 'electroadhesion' needs normal_force as a force"):
         load_dataset(str(ds_dir))
 
 

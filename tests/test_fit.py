@@ -38,8 +38,11 @@ def test_recovery_truth_in_95_interval(ea_fit):
 
 def test_summary_columns_and_diagnostics(ea_fit):
     table = ea_fit.summary()
-    assert list(table.columns) == ["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail",
+    assert list(table.columns) == ["unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail",
                                    "map", "tau", "contraction", "note"]
+    # SI units of the stored values (the data came in mN; the card states SI)
+    assert dict(table["unit"]) == {"E_star": "Pa", "tau0": "Pa", "d_air": "m", "beta0": "1", "phi": "m^2/J",
+                                   "eta": "m^2/N^2", "alpha": "1", "sigma": "N"}
     assert (table["r_hat"] < 1.02).all() and (table["ess_bulk"] > 400).all()
     sampler = ea_fit.attr("sampler")
     assert sampler["n_steps"] - sampler["burn"] >= 50 * max(sampler["tau"].values())

@@ -220,7 +220,8 @@ def test_model_card_names_only_registered_physics_functions(ref):
     doc = tomllib.loads(MODEL_TEXT) | {"forward": ref}
     with tempfile.TemporaryDirectory() as tmp:
         model = _load_ok_or_input_error(lambda: load_model(_write(tmp, "m.toml", dumps(doc))))
-    assert model is None or ref == "skinfit.physics.electroadhesion:electroadhesion_coulomb"
+    assert model is None or ref in ("skinfit.physics.electroadhesion:electroadhesion_coulomb",
+                                    "electroadhesion_coulomb")
 
 
 MODEL = load_model("electroadhesion_coulomb")
@@ -377,3 +378,130 @@ def test_malformed_physical_range_in_model_card(tmp_path, value):
     assert text != MODEL_TEXT
     with pytest.raises(InputError, match=r"m\.toml: parameters\[\d\]\.physical: expected"):
         load_model(_write(tmp_path, "m.toml", text))
+
+
+# ---- issue 21 classes 3, 4, 7 and issue 22's units: strategies that generate each class -------
+CSV_LINES = (DATA_DIR / "data.csv").read_text().splitlines()
+
+
+@st.composite
+def shifted_rows(draw):
+    """Class 3: 1-5 of the 216 data rows get one field more than the header (a decimal comma in
+    one of their numbers, or a trailing field); returns (csv bytes, first damaged data row)."""
+    lines = list(CSV_LINES)
+    rows = sorted(draw(st.sets(st.integers(1, len(lines) - 1), min_size=1, max_size=5)))
+    for r in rows:
+        if draw(st.booleans()) and "." in lines[r]:
+            lines[r] = lines[r].replace(".", ",", 1)
+        else:
+            lines[r] += "," + draw(st.sampled_from(["", "0", "x", "1.5"]))
+    return ("\n".join(lines) + "\n").encode(), rows[0]
+
+
+@SETTINGS
+@given(case=shifted_rows())
+def test_class3_property_rows_with_extra_fields_are_an_error_at_the_first_such_row(case):
+    csv, row = case
+    with tempfile.TemporaryDirectory() as tmp:
+        with pytest.raises(InputError, match=rf"data\.csv: column 5, row {row}: 5 fields where the header has 4"):
+            load_dataset(_dataset_dir(tmp, csv=csv))
+
+
+@SETTINGS
+@given(dup=st.integers(0, 3), at=st.integers(0, 3), unit=st.sampled_from(["", " [mN]", " [N]"]))
+def test_class3_property_a_header_naming_one_column_twice_is_an_error_naming_it(dup, at, unit):
+    """Class 3: the header's column ``dup`` written again over column ``at`` (4 x 4 x 3 cases)."""
+    header = CSV_LINES[0].split(",")
+    if dup == at:
+        return
+    name = header[dup]
+    header[at] = name + unit
+    csv = ("\n".join([",".join(header)] + CSV_LINES[1:]) + "\n").encode()
+    with tempfile.TemporaryDirectory() as tmp:
+        with pytest.raises(InputError, match=rf"data\.csv: column '{name}'.*ambiguous"):
+            load_dataset(_dataset_dir(tmp, csv=csv))
+
+
+path_text = st.lists(st.sampled_from(list("ab._-/\\ ~:") + ["..", "../", "/etc", "µ"]), min_size=1,
+                     max_size=12).map("".join)
+
+
+@SETTINGS
+@given(ident=path_text)
+def test_class4_property_an_id_is_never_a_path(ident):
+    """Class 4: ids drawn from path-like text (12 characters of a, b, '.', '_', '-', '/', '\\', ' ',
+    '~', ':', '..', '../', '/etc', 'µ'); an accepted id has no separator, no '..' and no leading '.'."""
+    doc = tomllib.loads(MODEL_TEXT) | {"id": ident}
+    with tempfile.TemporaryDirectory() as tmp:
+        model = _load_ok_or_input_error(lambda: load_model(_write(tmp, "m.toml", dumps(doc))))
+    if model is not None:
+        assert not any(s in ident for s in ("/", "\\", "..", " ", ":")) and not ident.startswith(".")
+
+
+@SETTINGS
+@given(file=st.one_of(path_text, st.sampled_from(["../data.csv", "/etc/passwd", "sub/../../x.csv", "./data.csv",
+                                                   "data.csv/.", "/dev/zero"])))
+def test_class4_property_a_cards_file_never_leaves_its_folder(file):
+    """Class 4: the card's ``file`` drawn from the same path-like text and known escapes; whatever
+    loads was read from inside the dataset folder."""
+    with tempfile.TemporaryDirectory() as tmp:
+        card = (DATA_DIR / "dataset.toml").read_text().replace('file = "data.csv"', f"file = {json.dumps(file)}")
+        d = _dataset_dir(tmp, card_text=card)
+        ds = _load_ok_or_input_error(lambda: load_dataset(d))
+        if ds is not None:
+            assert (d / file).resolve().is_relative_to(d.resolve())
+
+
+PHYSICS_NAMES = sorted({f"skinfit.physics.{m}:{n}" for m in ("electroadhesion", "contact_area", "textured",
+                                                            "ultrasonic", "wavy", "_cache")
+                        for n in dir(importlib.import_module(f"skinfit.physics.{m}")) if not n.startswith("__")})
+
+
+@SETTINGS
+@given(role=st.sampled_from(["forward", "shear", "shift", "derived"]), ref=st.sampled_from(PHYSICS_NAMES))
+def test_class7_property_a_card_names_only_code_registered_for_the_role(role, ref):
+    """Class 7: every attribute of every physics module (functions, helpers, constants, imported
+    modules: ~130 names) in each of the four roles; accepted exactly when registered for it."""
+    from skinfit import registry
+
+    field = {"forward": "forward", "shear": "sampling.shear.phi", "shift": "sampling.shift.d_air",
+             "derived": "derived.function"}[role]
+    try:
+        f = registry.resolve(role, ref, "m.toml", field)
+    except InputError as exc:
+        assert ref not in registry.BUILTIN[role]
+        assert str(exc).startswith(f"m.toml: {field}: '{ref}' is ")
+    else:
+        assert ref in registry.BUILTIN[role] and callable(f)
+
+
+UNIT_CASES = [("mN", "force", 1e-3), ("N", "force", 1.0), ("uN", "force", 1e-6), ("kN", "force", 1e3),
+              ("V", "voltage", 1.0), ("kV", "voltage", 1e3), ("mm", "length", 1e-3), ("um", "length", 1e-6),
+              ("µm", "length", 1e-6), ("kHz", "frequency", 1e3), ("Hz", "frequency", 1.0), ("1", "none", 1.0),
+              ("kPa", "pressure", 1e3), ("mm/s", "velocity", 1e-3), ("mm^2", "area", 1e-6), ("s", "time", 1.0)]
+
+
+@SETTINGS
+@given(fn=st.sampled_from(UNIT_CASES), v=st.sampled_from(UNIT_CASES), ft=st.sampled_from(UNIT_CASES))
+def test_units_property_accepted_exactly_when_the_dimension_is_the_models(fn, v, ft):
+    """Issue 22 units: each of the three model columns of an electroadhesion CSV gets one of 16
+    units (16^3 cases); the file loads exactly when each is a force / voltage / force, and then
+    its SI values are the file's times the unit's factor (stated here, not taken from skinfit)."""
+    frame = DATASET.frame.head(12)
+    units = {"normal_force": fn, "voltage": v, "tangential_force": ft}
+    header = "subject," + ",".join(f"{c} [{u[0]}]" for c, u in units.items())
+    body = "\n".join(f"S1,{a!r},{b!r},{c!r}" for a, b, c in
+                     zip(frame["normal_force"] * 7, frame["voltage"] + 1, frame["tangential_force"] * 3))
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "x.csv"
+        path.write_text(header + "\n" + body + "\n")
+        ok = fn[1] == "force" and v[1] == "voltage" and ft[1] == "force"
+        if not ok:
+            bad = next(c for c, u in units.items() if u[1] != {"voltage": "voltage"}.get(c, "force"))
+            with pytest.raises(InputError, match=rf"x\.csv: column '{bad} \[.*\]': unit .* needs {bad} as a"):
+                load_dataset(str(path), model="electroadhesion")
+            return
+        ds = load_dataset(str(path), model="electroadhesion")
+    np.testing.assert_allclose(ds.frame["normal_force"], frame["normal_force"] * 7 * fn[2], rtol=1e-14)
+    np.testing.assert_allclose(ds.frame["voltage"], (frame["voltage"] + 1) * v[2], rtol=1e-14)
+    np.testing.assert_allclose(ds.frame["tangential_force"], frame["tangential_force"] * 3 * ft[2], rtol=1e-14)

@@ -31,9 +31,9 @@ def test_card_matches_function_and_priors(card, rng):
 
 def test_card_may_only_name_registry_functions(tmp_path):
     text = (ROOT / "models" / "electroadhesion.toml").read_text()
-    for ref, match in [("os:system", "expected 'skinfit.physics.<module>:<function>'"),
-                       ("skinfit.physics.electroadhesion:np", "exports no model function 'np'"),
-                       ("skinfit.physics.nothere:f", "no physics module")]:
+    for ref, match in [("os:system", "'os:system' is not a registered forward function"),
+                       ("skinfit.physics.electroadhesion:np", "'skinfit.physics.electroadhesion:np' is not a registered"),
+                       ("skinfit.physics.nothere:f", "'skinfit.physics.nothere:f' is not a registered")]:
         bad = tmp_path / "bad.toml"
         bad.write_text(text.replace('"skinfit.physics.electroadhesion:electroadhesion"', f'"{ref}"'))
         with pytest.raises(skinfit.InputError, match=match):
@@ -105,7 +105,8 @@ def test_sampling_shift_and_product_declared_and_checked(tmp_path):
         ("tau0 = 1.0, E_star", "tau0 = 'x', E_star", r"exponent of 'tau0' must be a finite number"),
         ('d_air = "skinfit.physics.electroadhesion:air_gap_shift"',
          'phi = "skinfit.physics.electroadhesion:air_gap_shift"', r"'phi' has two sampling coordinates"),
-        ('d_air = "skinfit.physics.electroadhesion:air_gap_shift"', 'd_air = "os:getcwd"', r"skinfit.physics"),
+        ('d_air = "skinfit.physics.electroadhesion:air_gap_shift"', 'd_air = "os:getcwd"',
+             r"sampling.shift.d_air: 'os:getcwd' is not a registered shift function"),
     ]:
         bad = tmp_path / "bad.toml"
         assert old in text

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit import plots
+from skinfit import plots, registry
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -270,6 +270,8 @@ def standin(tmp_path_factory):
     module.__all__ = ["contact_pair", "wavy_offset"]
     module.contact_pair, module.wavy_offset = _contact_pair, _wavy_offset
     sys.modules[module.__name__] = module
+    for name in module.__all__:  # the code a card may name is what is registered (skinfit.registry)
+        registry.register("forward", f"{module.__name__}:{name}", getattr(module, name))
     d = tmp_path_factory.mktemp("standin")
     rng = np.random.default_rng(SEED)
     # contact area: area in mm^2 and impedance in N*s/m against force, three actuation levels
@@ -332,6 +334,8 @@ def standin(tmp_path_factory):
             for name, sub in [("ca", "ca"), ("wavy", "wavy")]}
     yield fits
     del sys.modules[module.__name__]
+    for name in module.__all__:
+        registry.unregister("forward", f"{module.__name__}:{name}")
 
 
 def test_two_observables_one_row_each_and_one_against_the_other(standin, tmp_path):

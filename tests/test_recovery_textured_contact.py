@@ -201,5 +201,6 @@ def test_derived_function_must_return_the_declared_quantities(tmp_path):
         model.derive({k: np.array([[v]]) for k, v in CA_CARD["subjects"]["S01"].items()},
                      {"normal_force": np.ones(2), "actuation_force": np.zeros(2)})
     bad.write_text(text.replace("contact_area:derived\"", "contact_area:nothere\""))
-    with pytest.raises(skinfit.InputError, match="exports no model function 'nothere'"):
+    with pytest.raises(skinfit.InputError, match=r"derived.function: 'skinfit.physics.contact_area:nothere' is not "
+                                                  r"a registered derived function"):
         skinfit.load_model(str(bad))
