@@ -115,7 +115,7 @@ def locate(kind: str, name) -> Path:
     p = Path(name)
     if kind == "datasets" and p.is_dir() and (p / "dataset.toml").is_file():
         return p / "dataset.toml"
-    if p.suffix == ".toml" and p.is_file():
+    if p.suffix == ".toml" and p.exists():  # a FIFO or device is refused by the reader, not taken for an id
         return p
     if any(c in str(name) for c in "/\\") or ".." in str(name) or str(name).startswith("."):
         raise InputError(str(name), f"no such {kind[:-1]} file, and an id is a name, not a path")

@@ -69,6 +69,8 @@ def parse_source(source):
 
 def check_source(source, where, field):
     """Raise an InputError unless every citation in ``source`` starts with a known key."""
+    if not isinstance(source, str):
+        raise InputError(where, f"expected a text \"KEY, where\" (got {type(source).__name__})", field=field)
     known = references()
     for key, _ in parse_source(source):
         if key not in known:

@@ -60,8 +60,10 @@ def test_missing_shipped_cards_say_where_they_were_looked_for(tmp_path, monkeypa
     """With nothing on the search path (no shipped files, an empty user folder) the error names
     every folder searched and where it came from, not an empty list."""
     import skinfit.paths
+    import skinfit.registry
 
     monkeypatch.setattr(skinfit.paths, "shipped_root", lambda: None)
+    monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
     monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
     for load, kind in ((skinfit.load_model, "models"), (skinfit.load_priors, "priors"),

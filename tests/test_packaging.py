@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 import skinfit
+import skinfit.registry
 import skinfit.paths
 from skinfit.cli import main
 
@@ -24,8 +25,10 @@ SHIPPED = {"models": sorted(p.stem for p in (ROOT / "models").glob("*.toml")),
 
 @pytest.fixture
 def isolated(tmp_path, monkeypatch):
-    """A search path with no $SKINFIT_PATH, no --path and an empty user folder under tmp_path."""
+    """A search path with no $SKINFIT_PATH, no --path, no plug-in folders and an empty user
+    folder under tmp_path."""
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
+    monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
     monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
     skinfit.paths.set_search_path([])
     yield tmp_path
