@@ -106,6 +106,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
         result.save(out_dir / rel)
         (out_dir / rel.parent / "summary.csv").write_text(result.summary().to_csv())
         rows.append({"group": label, "rows": len(sub), "seed": group_seed, "converged": result.converged,
+                     "warnings": len(result.warnings),  # guard rails and misfit (the save completed it)
                      "seconds": round(time.perf_counter() - t0, 3), "path": rel.as_posix()})
         _write_json(out_dir / "index.json", {"model": model.id, "dataset": dataset.id, "by": by,
                                              "seed": base, "groups": rows})
