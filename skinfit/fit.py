@@ -123,7 +123,7 @@ def fit(model, dataset, priors=None, *, rng=None, split=None, noise=None, consta
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
 
     nwalkers = nwalkers or default_walkers(post)
-    _memory_budget(post, nwalkers)  # refuse now, not after sampling, data too large to complete
+    _memory_budget(post)  # refuse now, not after sampling, data too large to complete
     ckpt, saved = None, None
     if checkpoint is not None:
         from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
@@ -283,27 +283,33 @@ class _Deferred:
     ndraws: int
     seed: np.ndarray
 
-    def draws(self, every=1):
-        """The draws of the deferred groups: every ``every``-th draw of each walker, (k, d)."""
+    def draws(self, every=1, walker_step=1):
+        """The draws of the deferred groups: every ``every``-th draw of every ``walker_step``-th
+        walker, (k, d)."""
         d = self.theta.shape[1]
-        return self.theta.reshape(self.nwalkers, self.ndraws, d)[:, ::every].reshape(-1, d)
+        return self.theta.reshape(self.nwalkers, self.ndraws, d)[::walker_step, ::every].reshape(-1, d)
 
-    def groups(self, post, every=1):
+    def groups(self, post, every=1, walker_step=1):
         """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id); with
-        ``every`` > 1 on every ``every``-th draw of each walker only (``draw`` coordinates kept)."""
-        ll, simulated = post.replicate(self.draws(every), np.random.default_rng(self.seed))
-        kept = np.arange(self.ndraws)[::every]
-        shape = (self.nwalkers, len(kept), post.n)
-        return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
-                             "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
-                            dims={o: ["obs_id"] for o in post.observables},
-                            coords={"obs_id": np.arange(post.n), "draw": kept})
+        ``every`` or ``walker_step`` > 1 on those draws only (``chain`` / ``draw`` coordinates kept)."""
+        ll, simulated = post.replicate(self.draws(every, walker_step), np.random.default_rng(self.seed))
+        chains, kept = np.arange(self.nwalkers)[::walker_step], np.arange(self.ndraws)[::every]
+        shape = (len(chains), len(kept), post.n)
+        with warnings.catch_warnings():  # one draw of a few walkers is meant (memory thinning)
+            warnings.filterwarnings("ignore", "Found chain dimension to be longer than draw")
+            return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
+                                 "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
+                                dims={o: ["obs_id"] for o in post.observables},
+                                coords={"obs_id": np.arange(post.n), "chain": chains, "draw": kept})
 
 
 #: Share of the available memory (:func:`available_memory`) the deferred groups may take while
 #: they are built: 2 groups x observables x draws x rows float64, counted twice (the arrays and
-#: the tree's copy).  Over it, :meth:`Fit.complete` keeps every k-th draw of each walker in them
-#: (recorded as ``pointwise_thinned``); when one draw per walker is over it, it refuses.
+#: the tree's copy; a save adds the file's image, about one copy more).  Over it,
+#: :meth:`Fit.complete` keeps every k-th draw of each walker in them, and when one draw per
+#: walker is still over it, one draw of every j-th walker (recorded as ``pointwise_thinned``;
+#: the posterior group keeps every draw); when a single draw is over it, :func:`fit` refuses
+#: before the MAP.
 MEMORY_FRACTION = 0.25
 
 
@@ -325,33 +331,39 @@ def _size(nbytes):
     return f"{nbytes / 2**30:.1f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.1f} MiB"
 
 
-def _memory_budget(post, nwalkers):
-    """(bytes one draw of the deferred groups takes, the budget): InputError when one draw per
-    walker is over the budget (checked by :func:`fit` before the MAP, and at completion)."""
+def _memory_budget(post):
+    """(bytes one draw of the deferred groups takes, the budget): InputError when a single draw
+    is over the budget (checked by :func:`fit` before the MAP, and at completion)."""
     available = available_memory()
     budget = MEMORY_FRACTION * available
     per_draw = pointwise_bytes(len(post.observables), post.n, 1)
-    if per_draw * nwalkers > budget:
+    if per_draw > budget:
         raise InputError(f"fit of {post.model.id} on {post.dataset.id}",
-                         f"the pointwise log-likelihood and predictive draws would need {_size(per_draw * nwalkers)} "
-                         f"even at one draw per walker ({post.n} rows x {len(post.observables)} observable(s) x "
-                         f"{nwalkers} walkers), over {MEMORY_FRACTION:.0%} of the available memory "
-                         f"({_size(available)}): fit a subset of the rows (e.g. --by a grouping column)")
+                         f"one posterior draw's pointwise log-likelihood and predictive values would need "
+                         f"{_size(per_draw)} ({post.n} rows x {len(post.observables)} observable(s)), over "
+                         f"{MEMORY_FRACTION:.0%} of the available memory ({_size(available)}): fit a subset of "
+                         "the rows (e.g. --by a grouping column)")
     return per_draw, budget
 
 
 def _thinning(post, deferred):
-    """(every, note): the draw step that fits the deferred groups in the memory budget."""
-    per_draw, budget = _memory_budget(post, deferred.nwalkers)
-    total = per_draw * deferred.nwalkers * deferred.ndraws
+    """(every, walker_step, note): the draws of the deferred groups that fit the memory budget."""
+    per_draw, budget = _memory_budget(post)
+    nw, nd = deferred.nwalkers, deferred.ndraws
+    total = per_draw * nw * nd
     if total <= budget:
-        return 1, None
-    every = math.ceil(total / budget)
-    kept = deferred.nwalkers * len(range(0, deferred.ndraws, every))
-    note = (f"pointwise log-likelihood and predictive draws on every {every}th draw of each walker ({kept} of "
-            f"{deferred.nwalkers * deferred.ndraws}): all draws would need {_size(total)}, over "
-            f"{MEMORY_FRACTION:.0%} of the available memory ({_size(budget / MEMORY_FRACTION)})")
-    return every, note
+        return 1, 1, None
+    fits = int(budget // per_draw)  # draws within the budget (>= 1, see _memory_budget)
+    if fits >= nw:
+        every, walker_step = math.ceil(nd / (fits // nw)), 1
+        which = f"every {every}th draw of each walker"
+    else:
+        every, walker_step = nd, math.ceil(nw / fits)
+        which = f"one draw of every {walker_step}th walker"
+    kept = len(range(0, nw, walker_step)) * len(range(0, nd, every))
+    note = (f"pointwise log-likelihood and predictive draws on {which} ({kept} of {nw * nd}): all draws would "
+            f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory ({_size(budget / MEMORY_FRACTION)})")
+    return every, walker_step, note
 
 
 def _derived_group(post, theta, nw, nd, dims, coords, attrs):
@@ -398,6 +410,9 @@ def _misfit_line(fit):
     if "misfit" not in fit.attrs:
         return "fit to the data: not checked (saved before skinfit checked it)"
     r = fit.attr("misfit")
+    if r.get("underpowered"):
+        return (f"fit to the data: NOT CHECKED: {r['draws']} pointwise draws (memory) cannot give p-values below "
+                f"{r['alpha']:g}/{r['m']}")
     pk = r.get("pareto_k")
     bad = [c["check"] for c in r["checks"] if c["warn"]] + (["pareto_k"] if pk and pk["warn"] else [])
     return (f"fit to the data: {'MISFIT (' + ', '.join(bad) + ')' if bad else 'no misfit found'}: "
@@ -464,23 +479,23 @@ class Fit:
         if self._deferred is None:
             return self
         t0 = time.perf_counter()
-        every, note = _thinning(self.posterior, self._deferred)
+        every, walker_step, note = _thinning(self.posterior, self._deferred)
         if note:
             warnings.warn(f"{self.model_id} on {self.dataset_id}: {note}", UserWarning, stacklevel=2)
-        tree, extra = self._tree, self._deferred.groups(self.posterior, every)
+        tree, extra = self._tree, self._deferred.groups(self.posterior, every, walker_step)
         nodes = {n: tree[n] for n in tree.children} | {n: extra[n] for n in extra.children}
         tree = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
                                      | {n: nodes[n].to_dataset(inherit=False) for n in sorted(nodes, key=GROUPS.index)})
         if note:
-            tree.attrs["pointwise_thinned"] = json.dumps({"every": every, "note": note})
+            tree.attrs["pointwise_thinned"] = json.dumps({"every": every, "walker_step": walker_step, "note": note})
         t1 = time.perf_counter()
-        self._check_misfit(tree, extra, every)
+        self._check_misfit(tree, extra, self._deferred.draws(every, walker_step))
         timings = json.loads(tree.attrs["timings"])
         tree.attrs["timings"] = json.dumps(timings | {"pointwise_s": t1 - t0, "misfit_s": time.perf_counter() - t1})
         self._tree, self._deferred = tree, None
         return self
 
-    def _check_misfit(self, tree, extra, every):
+    def _check_misfit(self, tree, extra, theta):
         """The fit's checks of its own fit to the data (:mod:`skinfit.misfit`) on the deferred
         groups just computed: the record as ``attrs["misfit"]``, each failed check appended to
         ``attrs["warnings"]`` (so to :attr:`warnings`, :meth:`report_text`, the saved file and
@@ -494,7 +509,7 @@ class Fit:
         ess = self.attr("sampler").get("ess_emcee", {})
         reff = float(np.clip(np.mean(list(ess.values())) / log_lik.shape[0] / log_lik.shape[1], 0.05, 1.0)) \
             if ess else 1.0
-        record = check_fit(post, self._deferred.draws(every), y_rep, log_lik=log_lik, reff=reff)
+        record = check_fit(post, theta, y_rep, log_lik=log_lik, reff=reff)
         found = misfit_messages(record)
         tree.attrs["misfit"] = json.dumps(record)
         tree.attrs["warnings"] = json.dumps(json.loads(tree.attrs.get("warnings", "[]")) + found)

@@ -157,7 +157,9 @@ def check_fit(post, theta, y_rep, *, log_lik=None, reff=1.0, alpha=ALPHA, n_draw
         rm = r_sum[o][order] / k
         trend_means[f"trend[{o}, {c}]"] = (np.add.reduceat(rm, starts) / counts).round(2).tolist()
     return {"checks": checks, "pareto_k": pareto, "draws": int(k), "alpha": alpha, "m": m,
-            "worst_rows": worst, "trend_means": trend_means}
+            "worst_rows": worst, "trend_means": trend_means,
+            # too few draws (memory thinning) for any p-value to reach the threshold
+            "underpowered": bool(1 / (1 + k) >= threshold)}
 
 
 def _pareto(log_lik, reff, n):

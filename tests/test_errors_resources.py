@@ -78,10 +78,23 @@ def test_class5_pointwise_groups_thinned_to_the_memory_budget(monkeypatch, tmp_p
     assert np.isfinite(float(loo(saved).elpd))
 
 
-def test_class5_refused_before_the_map_when_one_draw_per_walker_is_over_budget(monkeypatch):
+def test_class5_one_draw_of_every_jth_walker_when_a_draw_per_walker_is_over_budget(monkeypatch):
+    fit = _quiet_fit(MODEL, _large_rows(20), rng=1)
+    nw = fit._deferred.nwalkers
+    per_draw = fit_module.pointwise_bytes(1, 4320, 1)
+    monkeypatch.setattr(fit_module, "available_memory", lambda: per_draw * 5.5 / fit_module.MEMORY_FRACTION)
+    with pytest.warns(UserWarning, match=rf"one draw of every {-(-nw // 5)}th walker"):
+        fit.complete()
+    ll = fit.group("log_likelihood")
+    assert list(ll["chain"].values) == list(range(0, nw, -(-nw // 5))) and ll.sizes["draw"] == 1
+    assert fit.attr("misfit")["underpowered"]  # 5 draws cannot reach p < 0.05 / m
+    assert "fit to the data: NOT CHECKED: 5 pointwise draws (memory)" in fit.report_text()
+
+
+def test_class5_refused_before_the_map_when_one_draw_is_over_budget(monkeypatch):
     monkeypatch.setattr(fit_module, "available_memory", lambda: 100_000.0)
     monkeypatch.setattr(fit_module, "find_map", _no_fit)
-    with pytest.raises(InputError, match=r"would need .* even at one draw per walker \(4320 rows x 1 observable"):
+    with pytest.raises(InputError, match=r"one posterior draw's .* would need 0\.1 MiB \(4320 rows x 1 observable"):
         skinfit.fit(MODEL, _large_rows(20), rng=1)
 
 
