@@ -13,6 +13,7 @@ import json
 import math
 import os
 import shutil
+import sys
 import tempfile
 import time
 import warnings
@@ -327,6 +328,10 @@ def pointwise_bytes(n_obs, n_rows, n_draws):
     return 2 * 2 * 8 * n_obs * n_rows * n_draws
 
 
+def _ordinal(k):
+    return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
+
+
 def _size(nbytes):
     return f"{nbytes / 2**30:.1f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.1f} MiB"
 
@@ -356,10 +361,10 @@ def _thinning(post, deferred):
     fits = int(budget // per_draw)  # draws within the budget (>= 1, see _memory_budget)
     if fits >= nw:
         every, walker_step = math.ceil(nd / (fits // nw)), 1
-        which = f"every {every}th draw of each walker"
+        which = f"every {_ordinal(every)} draw of each walker"
     else:
         every, walker_step = nd, math.ceil(nw / fits)
-        which = f"one draw of every {walker_step}th walker"
+        which = f"one draw of every {_ordinal(walker_step)} walker"
     kept = len(range(0, nw, walker_step)) * len(range(0, nd, every))
     note = (f"pointwise log-likelihood and predictive draws on {which} ({kept} of {nw * nd}): all draws would "
             f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory ({_size(budget / MEMORY_FRACTION)})")
@@ -646,7 +651,14 @@ class Fit:
         # HDF5 writes into memory, never onto a disk that may fill (on a full disk it crashed the
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
         # is an OSError with the previous file in place
-        data = self.idata.to_netcdf(engine="h5netcdf")
+        tree = self.idata
+        if "dask" in sys.modules:  # in a Dask worker xarray would take a distributed lock named by the target
+            import dask
+
+            with dask.config.set(scheduler="synchronous"):
+                data = tree.to_netcdf(engine="h5netcdf")
+        else:
+            data = tree.to_netcdf(engine="h5netcdf")
         free = shutil.disk_usage(path.parent).free
         if free < data.nbytes + (1 << 20):
             raise OSError(errno.ENOSPC, f"no space to save the fit: {data.nbytes / 2**20:.1f} MiB needed, "
