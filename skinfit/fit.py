@@ -606,8 +606,10 @@ class Fit:
         table["contraction"] = contraction
         table["note"] = notes
         table = pd.concat([table, _derived_summary(self._tree)])
-        return table[["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
-                      "contraction", "note"]]
+        table = table[["mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
+                       "contraction", "note"]]
+        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.guardrails, skinfit.misfit)
+        return table
 
     def diagnostics(self):
         """Sampler, optimiser and support diagnostics as one dict."""

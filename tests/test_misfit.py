@@ -51,6 +51,7 @@ def test_class8_contaminated_coulomb_data_warns_in_text_file_and_report(tmp_path
     assert record["pareto_k"]["count"] >= 20  # most of the 26 multiplied rows are influential
     text = fit.report_text()
     assert "fit to the data: MISFIT" in text and text.count("WARN: model does not describe the data") == len(found)
+    assert [w for w in fit.summary().attrs["warnings"] if w["check"] == "misfit"] == found
     saved = skinfit.load_fit(fit.save(tmp_path / "fit.nc"))
     assert _misfits(saved) == found
     _, issues = fit_diagnostics(saved)
