@@ -32,7 +32,6 @@ posterior.  Cost: ``PPC_DRAWS`` (400, or 3 m / ``ALPHA`` if more) draws' predict
 on at most 500 rows (see the wall-time figures in bench/results/misfit.md).
 """
 
-import json
 import math
 import warnings
 
@@ -225,10 +224,6 @@ def misfit_messages(record):
                                f"{PARETO_K} (max {pk['max_k']:.2f}; rows {', '.join(map(str, pk['rows'][:5]))}): "
                                f"each alone moves the posterior; LOO comparisons are unreliable"})
     return out
-
-
-def record_json(record):
-    return json.dumps(record, default=float)
 
 
 def simulated_check(model, seed, *, dataset=None, contaminate=None, fit_model=None, **fit_kwargs):

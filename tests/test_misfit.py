@@ -15,7 +15,6 @@ from skinfit.models import list_models
 from skinfit.posterior import Posterior
 from skinfit.report import _as_fits, fit_diagnostics
 
-fit_module = importlib.import_module("skinfit.fit")
 #: electroadhesion_coulomb parameters for the issue's case (mu, E_star, d_air, sigma), near
 #: the shipped electroadhesion data's: friction 0.6, 35 kPa, 0.19 um air gap, 20 mN noise
 TRUTH = np.array([0.6, 35e3, 0.19e-6, 0.02])
