@@ -59,14 +59,60 @@ def read_toml(path):
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    if len(text) > MAX_TOML_CHARS:
+        raise InputError(path, f"{len(text)} characters: too large for a card (at most {MAX_TOML_CHARS})")
+    depth = _nesting(text) if text.count("[") + text.count("{") > MAX_TOML_DEPTH else 0
+    if depth > MAX_TOML_DEPTH:
+        raise InputError(path, f"arrays or tables nested {depth} deep (at most {MAX_TOML_DEPTH})")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(path, f"invalid TOML: {exc}") from None
+    except RecursionError:  # nesting the bracket count above did not see (e.g. inside odd quoting)
+        raise InputError(path, "arrays or tables nested too deeply to read") from None
     version = doc.get("schema_version")
     if version != 1:
         raise InputError(path, f"expected schema_version = 1 (got {version!r})", field="schema_version")
     return doc, text
+
+
+#: Limits of a card read before parsing: tomllib recurses once per nesting level (thousands of
+#: levels raise RecursionError) and holds the whole text; the shipped cards are under 10 kB and
+#: nest at most 3 deep.
+MAX_TOML_CHARS = 10_000_000
+MAX_TOML_DEPTH = 64
+
+
+def _nesting(text):
+    """Deepest nesting of ``[`` / ``{`` outside strings and comments (an upper bound for
+    TOML's arrays and inline tables; a table header ``[a]`` counts 1)."""
+    depth = deepest = 0
+    quote = None
+    i, n = 0, len(text)
+    while i < n:
+        ch = text[i]
+        if quote:
+            if ch == "\\" and quote[0] == '"':
+                i += 1
+            elif text.startswith(quote, i):
+                i += len(quote) - 1
+                quote = None
+        elif ch == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        elif text.startswith(('"""', "'''"), i):
+            quote = text[i:i + 3]
+            i += 2
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth = max(depth - 1, 0)
+        i += 1
+    return deepest
 
 
 def require(doc, key, kind, where, *, field_prefix="", default=...):

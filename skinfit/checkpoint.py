@@ -28,6 +28,7 @@ with the same seed.  Resuming against a changed model card, prior file, dataset,
 order or sampling setup is refused with an :class:`~skinfit.errors.InputError`.
 """
 
+import io
 import json
 import os
 import re
@@ -295,15 +296,18 @@ def write_atomic(path, build):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    image = io.BytesIO()  # HDF5 builds in memory: on a full disk its own writes crashed the process (rc 139)
+    with h5py.File(image, "w") as f:
+        build(f)
     tmp = temp_file(path)
     try:
-        with h5py.File(tmp, "w") as f:
-            build(f)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        try:  # a full disk: OSError naming the file, the previous file kept
+            with open(tmp, "wb") as f:
+                f.write(image.getbuffer())
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise OSError(exc.errno, f"cannot write: {exc.strerror}", str(path)) from None
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     finally:

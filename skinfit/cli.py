@@ -115,6 +115,37 @@ def _cmd_datasets(args):
               f"  columns (units as stored; converted to SI on load): {cols}\n")
 
 
+def _int_in(lo, hi, what):
+    """argparse type: an integer lo <= n <= hi (a one-line usage error otherwise)."""
+
+    def parse(text):
+        try:
+            value = int(text, 0) if text.strip().lower().startswith(("0x", "0o", "0b")) else int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what} (got {text!r})") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected {what} (got {text})")
+        return value
+
+    return parse
+
+
+def _positive_float(text):
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0 (got {text!r})") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0 (got {text})")
+    return value
+
+
+#: --seed: numpy seeds are >= 0, and a fit records its seed as a 64-bit integer
+_SEED = _int_in(0, 2**63 - 1, "a seed, an integer 0 .. 2**63-1")
+_COUNT = _int_in(1, 10**9, "a whole number >= 1")
+
+
 def _parse_split(items):
     out = {}
     for item in items or []:
@@ -238,18 +269,18 @@ def build_parser():
                    "in its header (normal_force [mN], voltage [V], ...): its card is then written to OUT/dataset/")
     s.add_argument("--out", required=True, help="run directory; fit.nc and summary.csv go there")
     s.add_argument("--priors", help="prior file id or path (default: priors/<model>.toml)")
-    s.add_argument("--seed", type=int, default=None, help="seed: the same seed gives identical samples")
+    s.add_argument("--seed", type=_SEED, default=None, help="seed: the same seed gives identical samples")
     s.add_argument("--split", action="append", metavar="PARAM=COLUMN",
                    help="fit PARAM once per level of COLUMN (repeatable), e.g. alpha=voltage")
     s.add_argument("--noise", choices=["normal", "student_t", "lognormal"], help="noise model override")
-    s.add_argument("--ess", type=float, default=400, help="minimum effective sample size (default 400)")
-    s.add_argument("--max-steps", type=int, default=20000, help="emcee step cap (default 20000)")
+    s.add_argument("--ess", type=_positive_float, default=400, help="minimum effective sample size (default 400)")
+    s.add_argument("--max-steps", type=_COUNT, default=20000, help="emcee step cap (default 20000)")
     s.add_argument("--by", action="append", metavar="COLUMN",
                    help="fit each level of COLUMN separately (repeatable, e.g. --by subject); "
                         "one result per group under --out plus index.json")
     s.add_argument("--resume", action="store_true",
                    help="continue an interrupted fit from its checkpoint in --out")
-    s.add_argument("--checkpoint-every", type=float, default=30.0, metavar="SECONDS",
+    s.add_argument("--checkpoint-every", type=_positive_float, default=30.0, metavar="SECONDS",
                    help="seconds between checkpoints (OUT/checkpoint.h5) while sampling (default 30)")
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -271,26 +302,26 @@ def build_parser():
     s = sub.add_parser("campaign", help="run a (models x datasets x groups) matrix of fits")
     s.add_argument("campaign", help="campaign TOML file")
     s.add_argument("--scheduler", help="Dask scheduler: tcp://HOST:PORT, or 'local' for a LocalCluster")
-    s.add_argument("--workers", type=int, default=None, help="local worker processes (default: cores)")
+    s.add_argument("--workers", type=_COUNT, default=None, help="local worker processes (default: cores)")
     s.add_argument("--json", action="store_true", help="print the index as JSON (progress goes to stderr)")
     s.set_defaults(func=_lazy("skinfit.campaign", "cli_campaign"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")
     s.add_argument("--dataset", help="shipped dataset whose design is simulated on (default: the model's)")
-    s.add_argument("--n-sims", type=int, default=100, help="number of simulated datasets (default 100)")
-    s.add_argument("--draws", type=int, default=99, help="posterior draws each truth is ranked among (default 99)")
-    s.add_argument("--rows", type=int, help="use at most this many rows of the design, evenly spaced")
-    s.add_argument("--ess", type=float, default=100, help="minimum ESS of each fit (default 100)")
-    s.add_argument("--max-steps", type=int, default=4000, help="emcee step cap of each fit (default 4000)")
-    s.add_argument("--jobs", type=int, default=1, help="simulations in parallel processes (default 1)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--n-sims", type=_COUNT, default=100, help="number of simulated datasets (default 100)")
+    s.add_argument("--draws", type=_COUNT, default=99, help="posterior draws each truth is ranked among (default 99)")
+    s.add_argument("--rows", type=_COUNT, help="use at most this many rows of the design, evenly spaced")
+    s.add_argument("--ess", type=_positive_float, default=100, help="minimum ESS of each fit (default 100)")
+    s.add_argument("--max-steps", type=_COUNT, default=4000, help="emcee step cap of each fit (default 4000)")
+    s.add_argument("--jobs", type=_COUNT, default=1, help="simulations in parallel processes (default 1)")
+    s.add_argument("--seed", type=_SEED, default=0)
     s.add_argument("--out", default=None, help="directory for the rank table and histogram")
     s.set_defaults(func=_lazy("skinfit.sbc", "cli_sbc"))
     s = sub.add_parser("demo", help="fit every shipped dataset with its model and variants, compare, report")
     s.add_argument("--out", default="runs/demo", help="where the fits go (default runs/demo)")
     s.add_argument("--report", help="report directory (default OUT/report)")
-    s.add_argument("--seed", type=int, default=1, help="demo seed; each fit's seed derives from it")
-    s.add_argument("--jobs", type=int, help="parallel fits (default: one per core)")
+    s.add_argument("--seed", type=_SEED, default=1, help="demo seed; each fit's seed derives from it")
+    s.add_argument("--jobs", type=_COUNT, help="parallel fits (default: one per core)")
     s.add_argument("--dataset", action="append", help="only this shipped dataset (repeatable)")
     s.set_defaults(func=_lazy("skinfit.demo", "cli_demo"))
     from .design import add_parser as _design_parser
@@ -308,6 +339,13 @@ def _version():
 def _format_warning(message, category, filename, lineno, line=None):
     """One line per warning: its category and message, without the echoed source line."""
     return f"skinfit: {category.__name__}: {message}\n"
+
+
+def _os_error_text(exc):
+    """One line for an OSError at the boundary: what failed, where, and that nothing was replaced."""
+    where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+    return (f"{where}{exc.strerror or exc} (errno {exc.errno}); files written before are unchanged"
+            if exc.errno else f"{where}{exc}")
 
 
 def main(argv=None):
@@ -357,13 +395,22 @@ def _run(args):
     except MissingDependency as exc:
         print(f"skinfit: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("skinfit: interrupted", file=sys.stderr)
-        return 130
+    except RuntimeError as exc:  # MAPError: no start possible, its message names the rows (skinfit.optimize)
+        optimize = sys.modules.get("skinfit.optimize")  # not imported at start-up: raised only once it is
+        if optimize is None or not isinstance(exc, optimize.MAPError):
+            raise
+        print(f"skinfit: error: {exc}", file=sys.stderr)
+        return 2
     except BrokenPipeError:  # e.g. `skinfit models | head`: the reader left; no traceback
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 141
+    except OSError as exc:  # a disk full or read-only: the result files as they were before
+        print(f"skinfit: error: {_os_error_text(exc)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("skinfit: interrupted", file=sys.stderr)
+        return 130
     return code or 0
 
 

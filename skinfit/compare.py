@@ -11,6 +11,7 @@ import xarray as xr
 from .errors import InputError
 from .evidence import evidence
 from .evidence_methods import bayes_factor_strength
+from .run_labels import run_labels
 
 __all__ = ["compare", "loo", "cli_compare"]
 
@@ -43,11 +44,11 @@ def compare(fits, *, method="bridge", rng=None):
         described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.attrs['dataset_sha256'][:12]})" for f in fits)
         raise InputError("compare", f"fits were made on different data and cannot be compared: {described}")
     rows = []
-    for f in fits:
+    for f, label in zip(fits, run_labels(fits)):  # two runs of one model: labelled by their options
         ev = evidence(f, method=method, rng=rng)
         lo = loo(f)
         k = np.asarray(lo.pareto_k).ravel()
-        rows.append({"model": f.model_id, "log_z": ev.log_z, "log_z_se": ev.se, "method": ev.method,
+        rows.append({"model": label, "log_z": ev.log_z, "log_z_se": ev.se, "method": ev.method,
                      "approximate": ev.approximate, "elpd_loo": float(lo.elpd), "elpd_loo_se": float(lo.se),
                      "p_loo": float(lo.p), "pareto_k_gt_0.7": int((k > 0.7).sum()),
                      "converged": f.converged})

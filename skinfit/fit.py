@@ -8,8 +8,12 @@ pointwise ``log_likelihood`` and ``posterior_predictive`` groups, (draws x rows)
 of the tree's cost, are computed on first use (:attr:`Fit.idata`, :meth:`Fit.save`).
 """
 
+import errno
 import json
+import math
 import os
+import shutil
+import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -113,6 +117,8 @@ def fit(model, dataset, priors=None, *, units=None, rng=None, split=None, noise=
         is 0 and ``sampling_s`` sums every run's sampling.
     """
     t_start = time.perf_counter()
+    _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
+                    checkpoint_every=checkpoint_every)
     model = model if isinstance(model, Model) else load_model(model)
     dataset = as_dataset(dataset, model=model, units=units)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
@@ -128,6 +134,7 @@ def fit(model, dataset, priors=None, *, units=None, rng=None, split=None, noise=
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
 
     nwalkers = nwalkers or default_walkers(post)
+    _memory_budget(post)  # refuse now, not after sampling, data too large to complete
     ckpt, saved = None, None
     if checkpoint is not None:
         from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
@@ -169,6 +176,22 @@ def fit(model, dataset, priors=None, *, units=None, rng=None, split=None, noise=
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
     return Fit(idata, posterior=post, deferred=deferred)
+
+
+def _check_settings(rng, **settings):
+    """InputError for a seed numpy refuses or a fit cannot record (< 0 or >= 2**63) and for
+    step counts, ESS targets and intervals that are not positive (or not finite)."""
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and not 0 <= int(rng) < 2**63:
+        raise InputError("fit", f"expected a seed 0 .. 2**63-1 (got {int(rng)})", field="rng")
+    for name, value in settings.items():
+        if value is None and name == "nwalkers":
+            continue
+        integer = name in ("max_steps", "nwalkers")
+        ok = (isinstance(value, (int, np.integer)) and not isinstance(value, bool) if integer
+              else isinstance(value, (int, float, np.number)) and not isinstance(value, bool))
+        if not ok or not (0 < value < float("inf")):
+            raise InputError("fit", f"expected {'a whole number' if integer else 'a finite number'} > 0 "
+                                    f"(got {value!r})", field=name)
 
 
 def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
@@ -273,13 +296,91 @@ class _Deferred:
     ndraws: int
     seed: np.ndarray
 
-    def groups(self, post):
-        """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id)."""
-        ll, simulated = post.replicate(self.theta, np.random.default_rng(self.seed))
-        shape = (self.nwalkers, self.ndraws, post.n)
-        return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
-                             "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
-                            dims={o: ["obs_id"] for o in post.observables}, coords={"obs_id": np.arange(post.n)})
+    def draws(self, every=1, walker_step=1):
+        """The draws of the deferred groups: every ``every``-th draw of every ``walker_step``-th
+        walker, (k, d)."""
+        d = self.theta.shape[1]
+        return self.theta.reshape(self.nwalkers, self.ndraws, d)[::walker_step, ::every].reshape(-1, d)
+
+    def groups(self, post, every=1, walker_step=1):
+        """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id); with
+        ``every`` or ``walker_step`` > 1 on those draws only (``chain`` / ``draw`` coordinates kept)."""
+        ll, simulated = post.replicate(self.draws(every, walker_step), np.random.default_rng(self.seed))
+        chains, kept = np.arange(self.nwalkers)[::walker_step], np.arange(self.ndraws)[::every]
+        shape = (len(chains), len(kept), post.n)
+        with warnings.catch_warnings():  # one draw of a few walkers is meant (memory thinning)
+            warnings.filterwarnings("ignore", "Found chain dimension to be longer than draw")
+            return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
+                                 "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
+                                dims={o: ["obs_id"] for o in post.observables},
+                                coords={"obs_id": np.arange(post.n), "chain": chains, "draw": kept})
+
+
+#: Share of the available memory (:func:`available_memory`) the deferred groups may take while
+#: they are built: 2 groups x observables x draws x rows float64, counted twice (the arrays and
+#: the tree's copy; a save adds the file's image, about one copy more).  Over it,
+#: :meth:`Fit.complete` keeps every k-th draw of each walker in them, and when one draw per
+#: walker is still over it, one draw of every j-th walker (recorded as ``pointwise_thinned``;
+#: the posterior group keeps every draw); when a single draw is over it, :func:`fit` refuses
+#: before the MAP.
+MEMORY_FRACTION = 0.25
+
+
+def available_memory():
+    """Bytes of memory available now (psutil if installed, else the free physical pages)."""
+    try:
+        import psutil
+    except ImportError:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    return int(psutil.virtual_memory().available)
+
+
+def pointwise_bytes(n_obs, n_rows, n_draws):
+    """Peak bytes of the deferred groups for ``n_draws`` draws (see :data:`MEMORY_FRACTION`)."""
+    return 2 * 2 * 8 * n_obs * n_rows * n_draws
+
+
+def _ordinal(k):
+    return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
+
+
+def _size(nbytes):
+    return f"{nbytes / 2**30:.1f} GiB" if nbytes >= 2**30 else f"{nbytes / 2**20:.1f} MiB"
+
+
+def _memory_budget(post):
+    """(bytes one draw of the deferred groups takes, the budget): InputError when a single draw
+    is over the budget (checked by :func:`fit` before the MAP, and at completion)."""
+    available = available_memory()
+    budget = MEMORY_FRACTION * available
+    per_draw = pointwise_bytes(len(post.observables), post.n, 1)
+    if per_draw > budget:
+        raise InputError(f"fit of {post.model.id} on {post.dataset.id}",
+                         f"one posterior draw's pointwise log-likelihood and predictive values would need "
+                         f"{_size(per_draw)} ({post.n} rows x {len(post.observables)} observable(s)), over "
+                         f"{MEMORY_FRACTION:.0%} of the available memory ({_size(available)}): fit a subset of "
+                         "the rows (e.g. --by a grouping column)")
+    return per_draw, budget
+
+
+def _thinning(post, deferred):
+    """(every, walker_step, note): the draws of the deferred groups that fit the memory budget."""
+    per_draw, budget = _memory_budget(post)
+    nw, nd = deferred.nwalkers, deferred.ndraws
+    total = per_draw * nw * nd
+    if total <= budget:
+        return 1, 1, None
+    fits = int(budget // per_draw)  # draws within the budget (>= 1, see _memory_budget)
+    if fits >= nw:
+        every, walker_step = math.ceil(nd / (fits // nw)), 1
+        which = f"every {_ordinal(every)} draw of each walker"
+    else:
+        every, walker_step = nd, math.ceil(nw / fits)
+        which = f"one draw of every {_ordinal(walker_step)} walker"
+    kept = len(range(0, nw, walker_step)) * len(range(0, nd, every))
+    note = (f"pointwise log-likelihood and predictive draws on {which} ({kept} of {nw * nd}): all draws would "
+            f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory ({_size(budget / MEMORY_FRACTION)})")
+    return every, walker_step, note
 
 
 def _derived_group(post, theta, nw, nd, dims, coords, attrs):
@@ -317,6 +418,24 @@ def _derived_summary(tree):
     units = json.loads(tree.attrs["derived"])["quantities"]
     table["note"] = [f"derived [{units[i.split('[')[0]]}]" for i in table.index]
     return table
+
+
+def _misfit_line(fit):
+    """One line on the fit's check of its fit to the data (:mod:`skinfit.misfit`)."""
+    if fit.pending:
+        return "fit to the data: checked when the pointwise draws are computed (Fit.complete, save, skinfit fit)"
+    if "misfit" not in fit.attrs:
+        return "fit to the data: not checked (saved before skinfit checked it)"
+    r = fit.attr("misfit")
+    if r.get("underpowered"):
+        return (f"fit to the data: NOT CHECKED: {r['draws']} pointwise draws (memory) cannot give p-values below "
+                f"{r['alpha']:g}/{r['m']}")
+    pk = r.get("pareto_k")
+    bad = [c["check"] for c in r["checks"] if c["warn"]] + (["pareto_k"] if pk and pk["warn"] else [])
+    return (f"fit to the data: {'MISFIT (' + ', '.join(bad) + ')' if bad else 'no misfit found'}: "
+            f"{r['m']} posterior-predictive checks on {r['draws']} draws, smallest p "
+            f"{min(c['p'] for c in r['checks']):.3g} (warns below {r['alpha']:g}/{r['m']}); PSIS-LOO Pareto k > 0.7 at "
+            + (f"{pk['count']} rows" if pk else "- rows (not computed)"))
 
 
 def _wall_time_text(t, pending=False):
@@ -377,14 +496,42 @@ class Fit:
         if self._deferred is None:
             return self
         t0 = time.perf_counter()
-        tree, extra = self._tree, annotate(self._deferred.groups(self.posterior), self.posterior)
+        every, walker_step, note = _thinning(self.posterior, self._deferred)
+        if note:
+            warnings.warn(f"{self.model_id} on {self.dataset_id}: {note}", UserWarning, stacklevel=2)
+        tree, extra = self._tree, annotate(self._deferred.groups(self.posterior, every, walker_step), self.posterior)
         nodes = {n: tree[n] for n in tree.children} | {n: extra[n] for n in extra.children}
         tree = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
                                      | {n: nodes[n].to_dataset(inherit=False) for n in sorted(nodes, key=GROUPS.index)})
+        if note:
+            tree.attrs["pointwise_thinned"] = json.dumps({"every": every, "walker_step": walker_step, "note": note})
+        t1 = time.perf_counter()
+        self._check_misfit(tree, extra, self._deferred.draws(every, walker_step))
         timings = json.loads(tree.attrs["timings"])
-        tree.attrs["timings"] = json.dumps(timings | {"pointwise_s": time.perf_counter() - t0})
+        tree.attrs["timings"] = json.dumps(timings | {"pointwise_s": t1 - t0, "misfit_s": time.perf_counter() - t1})
         self._tree, self._deferred = tree, None
         return self
+
+    def _check_misfit(self, tree, extra, theta):
+        """The fit's checks of its own fit to the data (:mod:`skinfit.misfit`) on the deferred
+        groups just computed: the record as ``attrs["misfit"]``, each failed check appended to
+        ``attrs["warnings"]`` (so to :attr:`warnings`, :meth:`report_text`, the saved file and
+        the report) and warned as a :class:`~skinfit.misfit.MisfitWarning`."""
+        from .misfit import MisfitWarning, check_fit, misfit_messages
+
+        post = self.posterior
+        pp, ll = extra["posterior_predictive"], extra["log_likelihood"]
+        y_rep = {o: pp[o].values.reshape(-1, post.n) for o in post.observables}
+        log_lik = sum(ll[o].values for o in post.observables)
+        ess = self.attr("sampler").get("ess_emcee", {})
+        reff = float(np.clip(np.mean(list(ess.values())) / log_lik.shape[0] / log_lik.shape[1], 0.05, 1.0)) \
+            if ess else 1.0
+        record = check_fit(post, theta, y_rep, log_lik=log_lik, reff=reff)
+        found = misfit_messages(record)
+        tree.attrs["misfit"] = json.dumps(record)
+        tree.attrs["warnings"] = json.dumps(json.loads(tree.attrs.get("warnings", "[]")) + found)
+        for w in found:
+            warnings.warn(f"{self.model_id} on {self.dataset_id}: {w['message']}", MisfitWarning, stacklevel=3)
 
     @property
     def attrs(self):
@@ -472,8 +619,10 @@ class Fit:
         table["note"] = notes
         table = pd.concat([table, _derived_summary(self._tree)])
         table["unit"] = [self._unit(n) for n in table.index]
-        return table[["unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
-                      "contraction", "note"]]
+        table = table[["unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
+                       "contraction", "note"]]
+        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.guardrails, skinfit.misfit)
+        return table
 
     def _unit(self, name):
         """SI unit of a summary row (``E_star``, ``alpha[75]``, a derived quantity), from the
@@ -502,6 +651,8 @@ class Fit:
                  f"seed: {seed_text}",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
+                 _misfit_line(self),
+                 *(["note: " + self.attr("pointwise_thinned")["note"]] if "pointwise_thinned" in self.attrs else []),
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
                  f"acceptance mean {s['acceptance_mean']:.3f} (min {s['acceptance_min']:.3f})  "
                  f"max R-hat {s['rhat_max']:.4f}",
@@ -525,13 +676,32 @@ class Fit:
         pending fit is completed first)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
+        # HDF5 writes into memory, never onto a disk that may fill (on a full disk it crashed the
+        # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
+        # is an OSError with the previous file in place
+        tree = self.idata
+        if "dask" in sys.modules:  # in a Dask worker xarray would take a distributed lock named by the target
+            import dask
+
+            with dask.config.set(scheduler="synchronous"):
+                data = tree.to_netcdf(engine="h5netcdf")
+        else:
+            data = tree.to_netcdf(engine="h5netcdf")
+        free = shutil.disk_usage(path.parent).free
+        if free < data.nbytes + (1 << 20):
+            raise OSError(errno.ENOSPC, f"no space to save the fit: {data.nbytes / 2**20:.1f} MiB needed, "
+                                        f"{free / 2**20:.1f} MiB free", str(path))
         from .checkpoint import temp_file
 
         tmp = temp_file(path)  # unique per writer; a killed writer's is removed by the next run
         try:
-            self.idata.to_netcdf(tmp, engine="h5netcdf")
-            with open(tmp, "rb") as f:
-                os.fsync(f.fileno())
+            try:
+                with open(tmp, "wb") as f:
+                    f.write(data)
+                    f.flush()
+                    os.fsync(f.fileno())
+            except OSError as exc:  # e.g. the disk filled meanwhile: name the file
+                raise OSError(exc.errno, f"cannot write: {exc.strerror}", str(path)) from None
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):

@@ -231,6 +231,14 @@ def _parse_model(path, digest):
     return model
 
 
+def check_constant(name, value, where):
+    """A model constant as a float, or InputError: every constant of a card (permittivities,
+    thicknesses, radii, Poisson's ratios, exponents) is a finite number > 0."""
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+        raise InputError(where, f"expected a finite number > 0 (got {value!r})", field=f"constants.{name}")
+    return float(value)
+
+
 def _parse_model_text(text, where, digest):
     import tomllib
 
@@ -249,7 +257,7 @@ def _parse_model_text(text, where, digest):
         else:
             raise InputError(where, f"expected a number or {{value=..., unit=..., source=...}} "
                              f"(got {spec!r})", field=f"constants.{cname}")
-        constants[cname] = value
+        constants[cname] = check_constant(cname, value, where)
     sampling = require(doc, "sampling", dict, where, default={})
     model = Model(
         id=check_id(require(doc, "id", str, where), where),

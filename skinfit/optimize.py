@@ -122,10 +122,24 @@ def find_map(post, rng, *, n_global=2000, n_local=3, maxeval=3000, xtol_rel=1e-7
                        log_density=float(best), starts=tuple(records), evaluations=evaluations,
                        seconds=time.perf_counter() - t0)
     if best_w is None:
-        raise MAPError(f"MAP failed: none of {n_global} prior draws nor {len(starts)} local starts "
-                       f"reached a finite log-density (outside prior: {post.counts['outside_prior']}, "
-                       f"outside the physical support: {post.counts['outside_support']} evaluations); "
-                       f"check the priors against the data units", result)
+        rows, why = post.impossible_rows(draws), "every draw is impossible at"
+        if not rows:  # finite but hopeless: no draw within ~1000 noise scales of these rows
+            with np.errstate(all="ignore"):
+                ll, _, _ = post.pointwise(draws[:post.CHUNK])
+            best = np.max(sum(ll.values()), axis=0)
+            rows, why = (np.flatnonzero(best < -5e5) + 1).tolist(), "no draw comes within 1000 noise scales of"
+        where = ""
+        if rows:
+            shown = ", ".join(map(str, rows[:10])) + (f" and {len(rows) - 10} more" if len(rows) > 10 else "")
+            cols = ", ".join(f"{c} = {', '.join(f'{v:.4g}' for v in post.x[c][np.array(rows[:3]) - 1])}"
+                             for c in post.x)
+            where = (f"; {why} data row(s) {shown} ({cols}, SI units"
+                     + (f"; {post.model.support}" if post.model.support else "") + ")")
+        raise MAPError(f"{post.dataset.path or post.dataset.id}: MAP failed: none of {n_global} prior draws nor "
+                       f"{len(starts)} local starts reached a finite log-density (outside prior: "
+                       f"{post.counts['outside_prior']}, outside the physical support: "
+                       f"{post.counts['outside_support']} evaluations){where}; check those rows and the "
+                       "priors against the data units", result)
     return result
 
 

@@ -132,7 +132,10 @@ class Posterior:
                 raise InputError(where, f"unknown noise model {kind!r} for {o} (expected one of "
                                  f"{', '.join(NOISE_MODELS)})", field="noise")
         self.noise = noise
-        self.constants = {**model.constants, **(constants or {})}
+        from .models import check_constant
+
+        self.constants = {**model.constants, **{k: check_constant(k, v, where) if k in model.constants else v
+                                                for k, v in (constants or {}).items()}}
         unknown = set(constants or {}) - set(model.constants)
         if unknown:
             raise InputError(where, f"unknown constants {sorted(unknown)} (model constants: "
@@ -426,6 +429,25 @@ class Posterior:
                 if not valid.all():
                     ll[o] = np.where(valid[:, None] if pointwise else valid, ll[o], -np.inf)
         return ll, pred, valid
+
+    def impossible_rows(self, theta):
+        """1-based data rows at which no parameter vector of ``theta`` (k, d) gives a valid,
+        finite prediction (the model's support condition fails, or the forward model or the
+        likelihood is not finite): rows that make every such draw impossible."""
+        theta = np.atleast_2d(theta)
+        k = len(theta)
+        possible = np.zeros(self.n_unique, dtype=bool)
+        for i in range(0, k, self.CHUNK):
+            block = theta[i:i + self.CHUNK]
+            params = {p: _take(block, j) for p, j in self._param_index_u.items()}
+            with np.errstate(all="ignore"):
+                pred_u, ok = self.model.forward(params, self._xu, self.constants)
+                good = np.broadcast_to(np.asarray(ok, dtype=bool), (len(block), self.n_unique)).copy()
+                for o in self.observables:
+                    mu = np.broadcast_to(pred_u[o], good.shape)
+                    good &= np.isfinite(mu) & ((mu > 0) if self.noise[o] == "lognormal" else True)
+            possible |= good.any(axis=0)
+        return (np.flatnonzero(~possible[self._inverse]) + 1).tolist()
 
     def pointwise(self, theta):
         """Pointwise log-likelihood: dict observable -> (k, n), the predictions, and validity.

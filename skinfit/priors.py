@@ -153,6 +153,11 @@ class PriorSet:
         return f"PriorSet({self.id!r}, {list(self.priors)})"
 
 
+#: Narrowest prior range, relative to the bounds' size: walkers are placed and moved in float64
+#: sampling coordinates, which need several significant digits across the range.
+MIN_RELATIVE_WIDTH = 1e-8
+
+
 def parse_prior(name, spec, where):
     prefix = f"{name}."
     if not isinstance(spec, dict):
@@ -180,6 +185,10 @@ def parse_prior(name, spec, where):
     lo, hi = float(bounds[0]), float(bounds[1])
     if math.isnan(lo) or math.isnan(hi) or not lo < hi:
         raise InputError(where, f"expected lower < upper (got [{lo:g}, {hi:g}])", field=prefix + "bounds")
+    if math.isfinite(hi - lo) and hi - lo <= MIN_RELATIVE_WIDTH * max(abs(lo), abs(hi)):
+        raise InputError(where, f"bounds [{lo!r}, {hi!r}] are {hi - lo:.3g} apart, under {MIN_RELATIVE_WIDTH:g} of "
+                         "their size: too narrow to sample (to fix the parameter, make it a constant of the "
+                         "model card)", field=prefix + "bounds")
     if dist in ("uniform", "loguniform") and not (math.isfinite(lo) and math.isfinite(hi)):
         raise InputError(where, f"a {dist} prior on an infinite range is improper: give finite bounds",
                          field=prefix + "bounds")

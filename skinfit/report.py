@@ -67,8 +67,10 @@ def _markdown(table):
     return "\n".join(lines)
 
 
-def _key(fit, taken):
-    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{fit.model_id}__{fit.dataset_id}").strip("_.")
+def _key(fit, taken, label=None):
+    """File-name key of a fit: model and dataset, and the options that tell two runs of them
+    apart (``label`` from :func:`skinfit.run_labels.run_labels`)."""
+    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{label or fit.model_id}__{fit.dataset_id}").strip("_.")
     key, k = base, 2
     while key in taken:
         key, k = f"{base}_{k}", k + 1
@@ -145,6 +147,12 @@ def fit_diagnostics(fit, summary=None):
         if w["check"] not in ("convergence", "acceptance"):  # already rows above
             add(f"guard rail: {w['check']}" + (f" ({w['parameter']})" if w["parameter"] else ""),
                 "tripped", "see skinfit.guardrails", w["status"], w["message"])
+    if "misfit" in fit.attrs:  # skinfit.misfit; its warnings are issues through the guard rails above
+        r = fit.attr("misfit")
+        bad = any(c["warn"] for c in r["checks"]) or bool(r.get("pareto_k") and r["pareto_k"]["warn"])
+        rows.append(("fit to the data: smallest posterior-predictive p", min(c["p"] for c in r["checks"]),
+                     f">= {r['alpha']:g} / {r['m']} checks (skinfit.misfit), {r['draws']} draws",
+                     "WARN" if bad else "ok"))
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.attrs.get("map_log_density", float("nan"))),
         f"best of {len(starts)} optimiser runs, final status {starts[-1]['status'] if starts else 'n/a'}", "info")
@@ -191,9 +199,11 @@ def _as_fits(fits):
             taken.add(key)
             out.append((key, f))
         return out
-    fits = [fits] if not isinstance(fits, (list, tuple)) else list(fits)
+    from .run_labels import run_labels
+
+    fits = [plots._as_fit(f) for f in ([fits] if not isinstance(fits, (list, tuple)) else fits)]
     taken = set()
-    return [(_key(f, taken), f) for f in map(plots._as_fit, fits)]
+    return [(_key(f, taken, label), f) for f, label in zip(fits, run_labels(fits, number_identical=False))]
 
 
 def _population_for(population, model_id, parameter):
@@ -263,6 +273,10 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
     if not items:
         raise InputError("skinfit report", "no fits given")
     issues_all, sections = [], []
+    from .run_labels import run_labels
+
+    # two runs of one model on one dataset: named by the options that differ
+    labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items], number_identical=False)))
     for key, fit in items:
         fit.complete()  # its predictive checks need the deferred groups; the diagnostics then give their time
         summary = fit.summary()
@@ -272,7 +286,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
         units = plots.parameter_units(fit)
         shown = summary.drop(columns="unit", errors="ignore")
         shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
-        where = f"{fit.model_id} on {fit.dataset_id}"
+        where = f"{labels[key]} on {fit.dataset_id}"
         figures = []
         for name, make, caption in _FIGURES:
             path = figdir / f"{key}_{name}.png"

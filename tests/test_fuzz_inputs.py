@@ -505,3 +505,42 @@ def test_units_property_accepted_exactly_when_the_dimension_is_the_models(fn, v,
     np.testing.assert_allclose(ds.frame["normal_force"], frame["normal_force"] * 7 * fn[2], rtol=1e-14)
     np.testing.assert_allclose(ds.frame["voltage"], (frame["voltage"] + 1) * v[2], rtol=1e-14)
     np.testing.assert_allclose(ds.frame["tangential_force"], frame["tangential_force"] * 3 * ft[2], rtol=1e-14)
+
+
+# ---- command-line numbers and model constants (issue 21, class 6) ------------------------------
+#: integers far past int64 both ways, every float (NaN, infinities, subnormals) and short texts;
+#: SETTINGS' 40 examples per test
+cli_numbers = st.one_of(st.integers(-2**80, 2**80), st.floats(allow_nan=True, allow_infinity=True),
+                        st.text(max_size=8), st.sampled_from(["0", "-0", "1e400", "0x10", "2**70", " 7 "]))
+
+
+@SETTINGS
+@given(option=st.sampled_from(["--seed", "--max-steps", "--ess", "--checkpoint-every"]), value=cli_numbers)
+def test_class6_cli_numbers_parse_into_range_or_exit_2(option, value):
+    from skinfit.cli import build_parser
+
+    try:
+        args = build_parser().parse_args(["fit", "m", "d", "--out", "o", option, str(value)])
+    except SystemExit as exc:
+        assert exc.code == 2
+        return
+    v = getattr(args, option[2:].replace("-", "_"))
+    if option == "--seed":
+        assert isinstance(v, int) and 0 <= v < 2**63
+    elif option == "--max-steps":
+        assert isinstance(v, int) and v >= 1
+    else:
+        assert 0 < v < math.inf
+
+
+@SETTINGS
+@given(value=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**6, 10**6)))
+def test_class6_constant_override_valid_or_input_error(value):
+    ds = load_dataset("electroadhesion_synthetic")
+    model = load_model("electroadhesion_coulomb")
+    try:
+        post = Posterior(model, load_priors(model.id), ds, constants={"d_sc": value})
+    except InputError as exc:
+        assert not (math.isfinite(value) and value > 0) and "constants.d_sc: expected a finite number > 0" in str(exc)
+        return
+    assert math.isfinite(value) and value > 0 and post.constants["d_sc"] == value

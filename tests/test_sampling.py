@@ -6,7 +6,6 @@ from pathlib import Path
 
 import emcee
 import numpy as np
-import pytest
 
 import skinfit
 from skinfit import sampling
