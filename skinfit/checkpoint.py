@@ -302,7 +302,7 @@ def write_atomic(path, build):
     tmp = temp_file(path)
     try:
         try:  # a full disk: OSError naming the file, the previous file kept
-            with open(tmp, "wb") as f:
+            with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_TRUNC), "wb") as f:
                 f.write(image.getbuffer())
                 f.flush()
                 os.fsync(f.fileno())

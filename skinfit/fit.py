@@ -696,7 +696,7 @@ class Fit:
         tmp = temp_file(path)  # unique per writer; a killed writer's is removed by the next run
         try:
             try:
-                with open(tmp, "wb") as f:
+                with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_TRUNC), "wb") as f:
                     f.write(data)
                     f.flush()
                     os.fsync(f.fileno())

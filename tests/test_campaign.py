@@ -325,10 +325,12 @@ def test_class4_ids_with_path_syntax_are_refused_before_any_write(tmp_path):
     model = tmp_path / "m.toml"
     model.write_text((Path(skinfit.__file__).resolve().parents[1] / "models" / "electroadhesion_coulomb.toml")
                      .read_text().replace('id = "electroadhesion_coulomb"', 'id = "../../m"'))
-    cases = [('["electroadhesion_coulomb"]', "../../x", r"datasets\[0\]: dataset id '../../x' cannot name"),
-             ('["electroadhesion_coulomb"]', "/tmp/abs", r"dataset id '/tmp/abs' cannot name"),
-             ('["electroadhesion_coulomb"]', "a/b", r"dataset id 'a/b' cannot name"),
-             (f'["{model}"]', "population", r"models\[0\]: model id '../../m' cannot name")]
+    # refused when the card is read (an id is a name: skinfit.models.check_id) or, for an id
+    # that got past it, by the campaign's own write-side check; either way the id is named
+    cases = [('["electroadhesion_coulomb"]', "../../x", r"'\.\./\.\./x'"),
+             ('["electroadhesion_coulomb"]', "/tmp/abs", r"'/tmp/abs'"),
+             ('["electroadhesion_coulomb"]', "a/b", r"'a/b'"),
+             (f'["{model}"]', "population", r"'\.\./\.\./m'")]
     for models, data_id, match in cases:
         head, _, rest = card.read_text().split("\n", 2)
         card.write_text(f'{head}\nid = "{data_id}"\n{rest}')
@@ -351,3 +353,14 @@ def test_class4_inside_refuses_paths_that_leave_out(tmp_path):
     (tmp_path / "out" / "link").symlink_to(tmp_path)
     with pytest.raises(skinfit.InputError, match="outside the output folder"):
         inside(tmp_path / "out", tmp_path / "out" / "link" / "fit.nc")
+
+
+def test_class4_write_side_check_refuses_ids_the_card_reader_would_pass_on():
+    """The campaign's own guard (skinfit.groups.check_name) refuses path syntax even when an id
+    reaches it by another route than a card (e.g. a Dataset built in Python)."""
+    from skinfit.groups import check_name
+
+    assert check_name("electroadhesion_synthetic", "dataset id", "c.toml") == "electroadhesion_synthetic"
+    for bad in ("../../x", "/tmp/abs", "a/b", "..", ".hidden", "a b", ""):
+        with pytest.raises(skinfit.InputError, match="cannot name a result folder"):
+            check_name(bad, "dataset id", "c.toml")
