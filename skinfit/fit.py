@@ -18,7 +18,6 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-import arviz as az
 import numpy as np
 import pandas as pd
 import xarray as xr
@@ -245,10 +244,12 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
-    tree = az.from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
-                         "observed_data": observed, "constant_data": constant,
-                         **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
-                        dims=dims, coords=coords, attrs={"/": attrs})
+    from arviz_base import from_dict
+
+    tree = from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
+                      "observed_data": observed, "constant_data": constant,
+                      **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
+                     dims=dims, coords=coords, attrs={"/": attrs})
     return tree, deferred
 
 
@@ -263,11 +264,13 @@ class _Deferred:
 
     def groups(self, post):
         """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id)."""
+        from arviz_base import from_dict
+
         ll, simulated = post.replicate(self.theta, np.random.default_rng(self.seed))
         shape = (self.nwalkers, self.ndraws, post.n)
-        return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
-                             "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
-                            dims={o: ["obs_id"] for o in post.observables}, coords={"obs_id": np.arange(post.n)})
+        return from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
+                          "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
+                         dims={o: ["obs_id"] for o in post.observables}, coords={"obs_id": np.arange(post.n)})
 
 
 def _derived_group(post, theta, nw, nd, dims, coords, attrs):
@@ -299,7 +302,9 @@ def _derived_summary(tree):
         return None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        table = az.summary(tree, group="derived", ci_kind="hdi", ci_prob=0.94, round_to="none")
+        from arviz_stats import summary
+
+        table = summary(tree, group="derived", ci_kind="hdi", ci_prob=0.94, round_to="none")
     table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
     table.index = [_slot_name(i) for i in table.index]
     units = json.loads(tree.attrs["derived"])["quantities"]
@@ -431,7 +436,9 @@ class Fit:
         """
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            table = az.summary(self._tree, ci_kind="hdi", ci_prob=0.94, round_to="none",
+            from arviz_stats import summary
+
+            table = summary(self._tree, ci_kind="hdi", ci_prob=0.94, round_to="none",
                                var_names=[v for v in self._tree["posterior"].data_vars])
         table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
         table.index = [_slot_name(i) for i in table.index]
@@ -523,7 +530,7 @@ def load_fit(path):
     if not path.exists():
         raise InputError(path, "no such fit file")
     try:
-        tree = az.from_netcdf(path)
+        tree = xr.open_datatree(path)  # = arviz.from_netcdf, without importing arviz-plots
     except (OSError, ValueError) as exc:
         raise InputError(path, f"not a readable skinfit result ({exc})") from None
     if "model_id" not in tree.attrs:
