@@ -70,13 +70,17 @@ class PopulationView:
         return dict(getattr(self.result, "sampler", {}) or {})
 
     def population_interval(self, parameter):
-        """(median, lower, upper) of the population median of ``parameter`` (natural units)."""
+        """The population distribution of ``parameter`` (natural units) at the posterior medians
+        of its hyper-parameters: median and central 94% range, ``mu -+ 1.881 tau`` in the
+        sampling coordinate (exponentiated for a log coordinate), i.e. where 94% of subjects
+        are expected to lie; None when the result has no such rows."""
         t = self.hyper_table()
-        row = t[(t["parameter"] == parameter) & (t["quantity"] == "median")]
-        if row.empty:
+        rows = t[t["parameter"] == parameter].set_index("quantity")
+        if not {"mu", "tau"} <= set(rows.index):
             return None
-        r = row.iloc[0]
-        return {"median": float(r["estimate"]), "lo": float(r["lower"]), "hi": float(r["upper"])}
+        mu, tau = float(rows.loc["mu", "estimate"]), float(rows.loc["tau", "estimate"])
+        back = np.exp if rows.loc["mu", "coordinate"] == "log" else (lambda v: v)
+        return {"median": float(back(mu)), "lo": float(back(mu - 1.881 * tau)), "hi": float(back(mu + 1.881 * tau))}
 
 
 def subjects_section(fits):
@@ -108,7 +112,7 @@ def population_section(result):
     """Tables of a population result: hyper-parameters, and shrunk beside separate estimates.
 
     Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
-    "sampler", "intervals": {parameter: population median interval}}.
+    "sampler", "intervals": {parameter: the population distribution's median and 94% range}}.
     """
     view = result if isinstance(result, PopulationView) else PopulationView(result)
     hyper = view.hyper_table().set_index(["parameter", "quantity"])

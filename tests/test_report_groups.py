@@ -70,3 +70,24 @@ def test_the_report_says_when_evidence_and_loo_rank_models_differently():
     disagree = pd.DataFrame({"model": ["a", "b"], "log_z": [-1.0, -5.0], "elpd_loo": [1.0, 3.0]})
     note = report.ranking_note(disagree)
     assert "by log Z a > b" in note and "by ELPD (LOO) b > a" in note and "prior" in note
+
+
+def test_population_band_is_where_94_percent_of_subjects_lie():
+    """Log-normal population exp(Normal(mu, tau)): median exp(mu), 94% range exp(mu -+ 1.881 tau)."""
+    from skinfit.report_groups import PopulationView
+
+    class Result:
+        parameters, subjects = ["E"], ["S01"]
+
+        def summary(self):
+            return pd.DataFrame([{"parameter": "E", "quantity": "mu", "estimate": np.log(2e4), "lower": 0.0,
+                                  "upper": 0.0, "coordinate": "log"},
+                                 {"parameter": "E", "quantity": "tau", "estimate": 0.5, "lower": 0.0,
+                                  "upper": 0.0, "coordinate": "log"}])
+
+    band = PopulationView(Result()).population_interval("E")
+    from scipy import stats
+
+    lo, hi = stats.lognorm(0.5, scale=2e4).ppf([0.03, 0.97])
+    assert band["median"] == pytest.approx(2e4)
+    assert band["lo"] == pytest.approx(lo, rel=1e-3) and band["hi"] == pytest.approx(hi, rel=1e-3)
