@@ -11,6 +11,7 @@ seconds on a loaded 2-core machine; bench/results/startup.md).
 """
 
 import importlib
+import importlib.util
 import sys
 import types
 
@@ -47,8 +48,10 @@ class _Package(types.ModuleType):
                 value = "0.0.0+unknown"
             super().__setattr__(name, value)
             return value
-        if name not in _LAZY:
-            raise AttributeError(f"module 'skinfit' has no attribute {name!r}")
+        if name not in _LAZY:  # a submodule (skinfit._toml, skinfit.plots...), as eager imports gave
+            if name.startswith("__") or importlib.util.find_spec(f"{__name__}.{name}") is None:
+                raise AttributeError(f"module 'skinfit' has no attribute {name!r}")
+            return importlib.import_module(f".{name}", __name__)
         value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
         super().__setattr__(name, value)
         return value
