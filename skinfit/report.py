@@ -172,7 +172,7 @@ def fit_diagnostics(fit, summary=None):
         f"<= {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound", "WARN" if bounds else "ok")
     for w in fit.warnings:  # whatever the fit recorded: guard rails, model-fit (misfit) checks...
         if w.get("check") not in ("convergence", "acceptance"):  # already rows above
-            add(f"fit warning: {w.get('check', 'unnamed')}" + (f" ({w['parameter']})" if w.get("parameter") else ""),
+            add(f"guard rail: {w.get('check', 'unnamed')}" + (f" ({w['parameter']})" if w.get("parameter") else ""),
                 "tripped", "recorded with the fit (Fit.warnings)", w.get("status", "WARN"),
                 w.get("message", json.dumps(w, default=str)))
     starts = fit.attr("optimizer").get("starts", [])
