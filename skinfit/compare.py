@@ -3,10 +3,8 @@
 import warnings
 from pathlib import Path
 
-import arviz as az
 import numpy as np
 import pandas as pd
-import xarray as xr
 
 from .errors import InputError
 from .evidence import evidence
@@ -18,17 +16,20 @@ __all__ = ["compare", "loo", "cli_compare"]
 
 def loo(fit):
     """PSIS-LOO of a fit (ArviZ); several observables are summed per data row."""
+    import xarray as xr
+    from arviz_stats import loo as az_loo  # ~1-3 s to import: only where LOO is computed
+
     tree = fit.idata
     ll = tree["log_likelihood"].to_dataset()
     names = list(ll.data_vars)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if len(names) == 1:
-            return az.loo(tree, var_name=names[0])
+            return az_loo(tree, var_name=names[0])
         total = sum(ll[n] for n in names)
         combined = tree.copy()
         combined["log_likelihood"] = xr.DataTree(xr.Dataset({"total": total}))
-        return az.loo(combined, var_name="total")
+        return az_loo(combined, var_name="total")
 
 
 def compare(fits, *, method="bridge", rng=None):

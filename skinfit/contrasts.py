@@ -15,7 +15,6 @@ ArviZ), and ``P(A > B)`` (the fraction of paired draws with A > B).
 
 import itertools
 
-import arviz as az
 import numpy as np
 import pandas as pd
 
@@ -45,13 +44,15 @@ def contrast(a, b, prob=0.95):
     if a.shape != b.shape or a.ndim != 1:
         raise ValueError(f"expected paired 1-D draws of equal length (got {a.shape} and {b.shape})")
     diff = a - b
-    lo, hi = np.asarray(az.hdi(diff, prob=prob)).ravel()
+    from arviz_stats import hdi
+
+    lo, hi = np.asarray(hdi(diff, prob=prob)).ravel()
     out = {"diff_mean": float(diff.mean()), "diff_lower": float(lo), "diff_upper": float(hi),
            "ratio_median": np.nan, "ratio_lower": np.nan, "ratio_upper": np.nan,
            "p_greater": float(np.mean(a > b))}
     if np.all(b > 0) or np.all(b < 0):
         ratio = a / b
-        rlo, rhi = np.asarray(az.hdi(ratio, prob=prob)).ravel()
+        rlo, rhi = np.asarray(hdi(ratio, prob=prob)).ravel()
         out.update(ratio_median=float(np.median(ratio)), ratio_lower=float(rlo), ratio_upper=float(rhi))
     return out
 

@@ -24,8 +24,9 @@ __all__ = ["DEMO_OPTIONS", "demo_plan", "run_demo"]
 #: column, as ``skinfit.fit(split=...)``.
 DEMO_OPTIONS = {
     # the electroadhesion paper fits one alpha per voltage; a shared alpha is the default and the demo keeps it
-    "contact_area_synthetic": {"rows": {"subject": "S01"},
-                               "why": "Huloux, Willemet & Wiertlewski fits one subject at a time; all 13: --by subject"},
+    "contact_area_synthetic": {"rows": {"subject": "S01"}, "by": "subject",
+                               "why": "Huloux, Willemet & Wiertlewski fit one subject at a time; the model on every subject "
+                                      "(as --by subject) for the population and contrasts"},
     "wavy_synthetic": {"split": {"r": "wavelength", "s": "wavelength"},
                        "why": "Fujii, Okamoto & Yamada needed smaller contact parameters r, s at lambda = 20 mm"},
     "textured_synthetic": {"split": {"beta_h": "material"},
@@ -52,7 +53,23 @@ def demo_plan(seed):
             plan.append({"dataset": ds_id, "model": model_id, "seed": fit_seed, "split": split,
                          "rows": options.get("rows", {}), "why": options.get("why", ""),
                          "max_steps": options.get("max_steps", {}).get(model_id, 20000)})
+        if options.get("by"):  # the dataset's model on every other group too (``group`` set)
+            col = options["by"]
+            first = str(options.get("rows", {}).get(col))
+            for level in dict.fromkeys(ds.frame[col].astype(str)):
+                if level == first:
+                    continue
+                key = zlib.crc32(f"{ds_id}/{ds.model}/{col}={level}".encode())
+                fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
+                plan.append({"dataset": ds_id, "model": ds.model, "seed": fit_seed, "split": {},
+                             "rows": {col: level}, "why": "", "group": f"{col}={level}", "max_steps": 20000})
     return plan
+
+
+def _path(out, item):
+    """Where a plan item's fit is saved: OUT/dataset/model[/group]/fit.nc."""
+    base = Path(out) / item["dataset"] / item["model"]
+    return (base / item["group"].replace("=", "-") if item.get("group") else base) / "fit.nc"
 
 
 def _select(ds, rows):
@@ -111,13 +128,14 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
 
     out = Path(out)
     plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]
-    paths = [out / p["dataset"] / p["model"] / "fit.nc" for p in plan]
+    paths = [_path(out, p) for p in plan]
     todo = [(p, path) for p, path in zip(plan, paths) if not _done(path, p)]
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
          f"datasets ({len(plan) - len(todo)} already done under {out})")
     for p in plan:
         extra = f"  [{p['why']}]" if p["why"] else ""
-        echo(f"  {p['dataset']:<28} {p['model']:<30} seed {p['seed']}{extra}")
+        echo(f"  {p['dataset']:<28} {p['model'] + (' ' + p['group'] if p.get('group') else ''):<30} "
+             f"seed {p['seed']}{extra}")
     jobs = jobs or min(len(todo), os.cpu_count() or 1) or 1
     if todo:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
@@ -126,19 +144,30 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
                 r = fut.result()
                 flag = "converged" if r["converged"] else "NOT CONVERGED (see the report)"
                 echo(f"  done {r['dataset']} / {r['model']}: {r['seconds']:.1f} s, {flag}")
-    fits = {f"{p['dataset']} / {p['model']}": load_fit(path) for p, path in zip(plan, paths)}
+    fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""): load_fit(path)
+            for p, path in zip(plan, paths)}
     comparisons = {}
     for ds_id in dict.fromkeys(p["dataset"] for p in plan):
-        group = [(name, f) for name, f in fits.items() if name.startswith(f"{ds_id} /")]
-        if len(group) > 1:
-            comparisons[ds_id] = compare([f for _, f in group])
-            for (name, f), p in zip(group, [p for p in plan if p["dataset"] == ds_id]):
-                f.save(out / p["dataset"] / p["model"] / "fit.nc")  # keep the evidence with the fit
+        items = [(name, f, p) for (name, f), p in zip(fits.items(), plan)
+                 if p["dataset"] == ds_id and not p.get("group")]  # the competing models on the same rows
+        if len(items) > 1:
+            had = [bool(json.loads(f.attrs.get("evidence", "{}")).get("bridge")) for _, f, _ in items]
+            comparisons[ds_id] = compare([f for _, f, _ in items])
+            for (_, f, p), known in zip(items, had):
+                if not known:
+                    f.save(_path(out, p))  # keep the evidence with the fit (a reused fit has it)
             echo(f"\n{ds_id}: ranked by evidence\n"
                  + comparisons[ds_id][["log_z", "log_z_se", "log_bf_vs_best", "strength", "elpd_loo"]]
                  .to_string(float_format="{:.4g}".format))
+    from .report_groups import group_analyses
+
+    t0 = time.perf_counter()
+    populations, contrasts = group_analyses(fits, seed=seed, echo=echo)
+    if populations or contrasts:
+        echo(f"\npopulation of {', '.join(populations) or 'none'} and {len(contrasts)} contrast table(s): "
+             f"{time.perf_counter() - t0:.1f} s")
     index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets",
-                         comparison=comparisons or None)
+                         comparison=comparisons or None, populations=populations, contrasts=contrasts)
     (Path(report) / "demo_plan.json").write_text(json.dumps(plan, indent=1) + "\n")
     echo(f"\nreport: {index}")
     return index

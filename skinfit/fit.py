@@ -21,7 +21,6 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-import arviz as az
 import numpy as np
 import pandas as pd
 import xarray as xr
@@ -280,10 +279,12 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
-    tree = az.from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
-                         "observed_data": observed, "constant_data": constant,
-                         **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
-                        dims=dims, coords=coords, attrs={"/": attrs})
+    from arviz_base import from_dict
+
+    tree = from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
+                      "observed_data": observed, "constant_data": constant,
+                      **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
+                     dims=dims, coords=coords, attrs={"/": attrs})
     return annotate(tree, post), deferred
 
 
@@ -305,15 +306,17 @@ class _Deferred:
     def groups(self, post, every=1, walker_step=1):
         """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id); with
         ``every`` or ``walker_step`` > 1 on those draws only (``chain`` / ``draw`` coordinates kept)."""
+        from arviz_base import from_dict
+
         ll, simulated = post.replicate(self.draws(every, walker_step), np.random.default_rng(self.seed))
         chains, kept = np.arange(self.nwalkers)[::walker_step], np.arange(self.ndraws)[::every]
         shape = (len(chains), len(kept), post.n)
         with warnings.catch_warnings():  # one draw of a few walkers is meant (memory thinning)
             warnings.filterwarnings("ignore", "Found chain dimension to be longer than draw")
-            return az.from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
-                                 "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
-                                dims={o: ["obs_id"] for o in post.observables},
-                                coords={"obs_id": np.arange(post.n), "chain": chains, "draw": kept})
+            return from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
+                              "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
+                             dims={o: ["obs_id"] for o in post.observables},
+                             coords={"obs_id": np.arange(post.n), "chain": chains, "draw": kept})
 
 
 #: Share of the available memory (:func:`available_memory`) the deferred groups may take while
@@ -412,7 +415,9 @@ def _derived_summary(tree):
         return None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        table = az.summary(tree, group="derived", ci_kind="hdi", ci_prob=0.94, round_to="none")
+        from arviz_stats import summary
+
+        table = summary(tree, group="derived", ci_kind="hdi", ci_prob=0.94, round_to="none")
     table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
     table.index = [_slot_name(i) for i in table.index]
     units = json.loads(tree.attrs["derived"])["quantities"]
@@ -590,7 +595,9 @@ class Fit:
         """
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            table = az.summary(self._tree, ci_kind="hdi", ci_prob=0.94, round_to="none",
+            from arviz_stats import summary
+
+            table = summary(self._tree, ci_kind="hdi", ci_prob=0.94, round_to="none",
                                var_names=[v for v in self._tree["posterior"].data_vars])
         table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
         table.index = [_slot_name(i) for i in table.index]
@@ -737,7 +744,7 @@ def load_fit(path):
     if not path.exists():
         raise InputError(path, "no such fit file")
     try:
-        tree = az.from_netcdf(path)
+        tree = xr.open_datatree(path)  # = arviz.from_netcdf, without importing arviz-plots
     except (OSError, ValueError) as exc:
         raise InputError(path, f"not a readable skinfit result ({exc})") from None
     if "model_id" not in tree.attrs:

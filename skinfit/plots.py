@@ -37,6 +37,7 @@ import warnings
 from pathlib import Path
 
 import matplotlib
+import matplotlib.colors
 import matplotlib.ticker
 import numpy as np
 import pandas as pd
@@ -60,9 +61,16 @@ _MAX_LEVELS = 12  # a numeric panel column with more distinct values is cut into
 _N_CURVE_DRAWS = 300
 _N_GRID = 160
 _MAX_PAIR = 10
-_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
-            "#17becf", "#7f7f7f", "#bcbd22")
+#: Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008; yellow left out: too
+#: pale on white), then two darker greys.
+_COLOURS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000", "#666666")
+_MAP_COLOUR = "#D55E00"
 _DPI = 120
+#: Widest figure [in]: the report shows figures at their pixel size up to its 1136 px column
+#: (1200 px less padding), so 8 pt text stays >= 8 pt (13 px at 120 dpi) as displayed.
+MAX_WIDTH = 9.4
+#: Smallest font size [pt] of any text in a figure.
+MIN_FONT = 8
 
 
 def _ensure_backend():
@@ -150,12 +158,18 @@ def _use_log(slot, values):
     return bool(slot["log"] and values.min() > 0 and values.max() > 10 * values.min())
 
 
-def _log_ticks(ax, which="x", numticks=5):
+def _log_ticks(ax, which="x", numticks=5, sparse=False):
     """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
-    on a range of less than 1.5 decades, labelled as plain numbers; no minor tick labels."""
+    on a range of less than 1.5 decades (``sparse``: at most ``numticks`` evenly spaced values
+    away from the ends, for small panels), labelled as plain numbers; no minor tick labels."""
     axis = ax.xaxis if which == "x" else ax.yaxis
     lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
     short = math.log10(hi / lo) < 1.5
+    if short and sparse:
+        axis.set_major_locator(matplotlib.ticker.MaxNLocator(numticks, prune="both"))
+        axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
+        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        return
     axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0) if short else (1.0,),
                                                         numticks=3 * numticks if short else numticks))
     axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
@@ -180,7 +194,18 @@ def _finish(fig, path):
 
 
 def _new_figure(width, height):
-    return Figure(figsize=(width, height), layout="constrained")
+    return Figure(figsize=(min(width, MAX_WIDTH), height), layout="constrained")
+
+
+def _suptitle(fig, text, fontsize=10):
+    """A figure title wrapped at word boundaries (also after ``:`` and ``[``) to the figure's
+    width, so that a long model or dataset name is never cut at the canvas edge."""
+    import textwrap
+
+    per_line = max(20, int(fig.get_figwidth() * 72 / (0.6 * fontsize)))  # ~0.6 em per character
+    spaced = text.replace("[", " [").replace(",", ", ").replace(",  ", ", ")
+    lines = textwrap.wrap(spaced, per_line, break_long_words=True, break_on_hyphens=False)
+    return fig.suptitle("\n".join(lines).replace(" [", "["), fontsize=fontsize)
 
 
 # ---- posterior-predictive plots -----------------------------------------------------------
@@ -288,6 +313,25 @@ def _ppc_draws(fit, observable, max_draws=20000):
     return arr
 
 
+def observable_floor(fit, observable):
+    """Lower end of an observable's physical support in SI (0), or None when it may be negative.
+
+    An observable is non-negative when its card unit has a non-negative dimension
+    (:data:`skinfit.units.NONNEGATIVE`: forces, areas, impedances...) or it is a friction
+    coefficient (Coulomb's ``F_t / F_n`` with both forces >= 0); signed ratios such as the wavy
+    surface's ``force_ratio`` are left alone.
+    """
+    from .units import NONNEGATIVE, dimension
+
+    card = _card(fit)
+    unit = next((o.get("unit") for o in card.get("observables", []) if o.get("name") == observable), None)
+    try:
+        nonneg = unit is not None and dimension(unit) in NONNEGATIVE
+    except KeyError:
+        nonneg = False
+    return 0.0 if nonneg or observable == "friction_coefficient" else None
+
+
 def ppc_bands(fit):
     """Per observation: x, observed and the 5/25/50/75/95% posterior-predictive quantiles.
 
@@ -295,6 +339,11 @@ def ppc_bands(fit):
     q75, q95, panel, colour`` (``panel``/``colour`` are level codes of :func:`plot_spec`'s
     columns, labels in ``df.attrs``); values in the units the data came in. The 50% band is
     [q25, q75], the 90% band [q05, q95]: the bands :func:`plot_ppc` draws.
+
+    Quantiles of a non-negative observable (:func:`observable_floor`) are clipped at 0: a
+    normal noise model puts some predictive draws below 0, which no measurement can be (the
+    coverage of observed values >= 0 is unchanged). ``df.attrs["below_floor"]`` gives, per
+    observable, the share of predictive draws that fell below it (0 for log-normal noise).
     """
     fit = _as_fit(fit)
     spec = plot_spec(fit)
@@ -304,17 +353,23 @@ def ppc_bands(fit):
     x = np.asarray(cd[spec["x"]].values, dtype=float) / _factor(units.get(spec["x"]))
     panel, panel_labels = _keys(fit, spec["panels"], units)
     colour, colour_labels = _keys(fit, spec["colours"], units)
-    frames = []
+    frames, below = [], {}
     for o in spec["observables"]:
         f = _factor(units.get(o))
-        q = np.nanquantile(_ppc_draws(fit, o), QUANTILES, axis=0) / f
+        draws = _ppc_draws(fit, o)
+        q = np.nanquantile(draws, QUANTILES, axis=0)
+        floor = observable_floor(fit, o)
+        if floor is not None:
+            below[o] = float(np.mean(draws < floor))
+            q = np.maximum(q, floor)
+        q = q / f
         frame = pd.DataFrame({"observable": o, "obs_id": od["obs_id"].values, "x": x,
                               "observed": od[o].values / f, "panel": panel, "colour": colour})
         for name, row in zip(_BAND_COLUMNS, q):
             frame[name] = row
         frames.append(frame)
     out = pd.concat(frames, ignore_index=True)
-    out.attrs.update(panel_labels=panel_labels, colour_labels=colour_labels, spec=spec)
+    out.attrs.update(panel_labels=panel_labels, colour_labels=colour_labels, spec=spec, below_floor=below)
     return out
 
 
@@ -375,7 +430,7 @@ def _median_curves(fit, spec, keys):
                 out[o] = np.nanmedian(y, axis=0)
             if not grid:  # replicates at one x (or other covariates varying): their mean
                 out[o] = pd.Series(out[o]).groupby(xs).mean().to_numpy()
-        curves[key] = (xs if grid else np.unique(xs), out)
+        curves[key] = (xs if grid else np.unique(xs), out, grid)
     return curves
 
 
@@ -392,7 +447,7 @@ def _ppc_median_curves(fit, bands, keys):
             rows = bands[bands["observable"] == o].iloc[idx]
             med = rows.groupby("x")["q50"].mean() * _factor(units.get(o))
             xs, out[o] = med.index.to_numpy() * fx, med.to_numpy()
-        curves[key] = (xs, out)
+        curves[key] = (xs, out, False)
     return curves
 
 
@@ -409,23 +464,46 @@ def _reference(spec, fit, idx, xs_si):
     return -a[0] * k * np.sin(k * xs_si)  # docs/models/wavy_surface.md, eq. 2: ratio = g(x)
 
 
-def _grid(fig, nrows, ncols, n_panels, multi, n_obs):
+def _grid(fig, nrows, ncols, n_panels, multi, n_obs, transpose=False):
     """Axes as rows[r][panel]: multi = one row per observable (+ pair row), y shared per row,
-    x shared down a column; otherwise one row of ``n_panels`` wrapped, all axes shared."""
+    x shared down a column (``transpose``: the same axes laid out one panel per row, one
+    observable per column); otherwise one row of ``n_panels`` wrapped, all axes shared."""
     if not multi:
         axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True).ravel()
         for ax in axes[n_panels:]:
             ax.set_visible(False)
         return [list(axes[:n_panels])]
-    gs = fig.add_gridspec(nrows, ncols)
+    gs = fig.add_gridspec(ncols, nrows) if transpose else fig.add_gridspec(nrows, ncols)
     rows = []
     for r in range(nrows):
         row = []
         for c in range(ncols):
             sharex = rows[0][c] if 0 < r < n_obs else None
-            row.append(fig.add_subplot(gs[r, c], sharex=sharex, sharey=row[0] if c else None))
+            row.append(fig.add_subplot(gs[c, r] if transpose else gs[r, c], sharex=sharex,
+                                       sharey=row[0] if c else None))
         rows.append(row)
     return rows
+
+
+def _bands_overlap(bands, observable, panel, n_colours, share=0.5):
+    """True when, in some panel, two colour levels' 90% bands overlap over more than ``share``
+    of the narrower band at the x values they share (then each level gets a panel)."""
+    sub = bands[bands["observable"] == observable]
+    for p in np.unique(panel):
+        agg = {c: sub[(sub["panel"] == p) & (sub["colour"] == c)].groupby("x")[["q05", "q95"]].mean()
+               for c in range(n_colours)}
+        for a in range(n_colours):
+            for b in range(a + 1, n_colours):
+                common = agg[a].index.intersection(agg[b].index)
+                if not len(common):
+                    continue
+                lo = np.maximum(agg[a].loc[common, "q05"], agg[b].loc[common, "q05"])
+                hi = np.minimum(agg[a].loc[common, "q95"], agg[b].loc[common, "q95"])
+                narrow = np.minimum(agg[a].loc[common, "q95"] - agg[a].loc[common, "q05"],
+                                    agg[b].loc[common, "q95"] - agg[b].loc[common, "q05"])
+                if np.mean(np.clip(hi - lo, 0, None) / np.where(narrow > 0, narrow, np.inf)) > share:
+                    return True
+    return False
 
 
 def plot_ppc(fit, path=None):
@@ -433,10 +511,13 @@ def plot_ppc(fit, path=None):
 
     Per panel (a level of the card's ``plot.panels`` columns): the data, the 50% and 90%
     posterior-predictive bands (per observation: quantiles of the ``posterior_predictive``
-    draws) and the posterior median of the noiseless prediction; for models with two
+    draws, clipped at 0 for a non-negative observable, see :func:`ppc_bands`) and the
+    posterior median of the noiseless prediction, a curve on a fine grid of x when nothing
+    else varies within the panel, else markers at the observed x; for models with two
     observables, one row per observable plus a row of one observable against the other;
     the wavy-surface ball-bearing curve (eq. 2) for reference when the data allow it.
-    Axes are in the units the data came in.
+    Levels of a colour column get one colour each (Okabe-Ito) and, when their bands overlap,
+    one panel each. Axes are in the units the data came in.
 
     Returns the matplotlib Figure (written to ``path`` when given).
     """
@@ -449,36 +530,52 @@ def plot_ppc(fit, path=None):
     first = bands[bands["observable"] == observables[0]]
     panel = first["panel"].to_numpy()
     colour = first["colour"].to_numpy()
-    n_panels = len(panel_labels)
+    n_colours = len(colour_labels)
     pair = spec["pair"] if spec["pair"] and all(p in observables for p in spec["pair"]) else None
-    keys = panel * len(colour_labels) + colour
+    keys = panel * n_colours + colour
     try:
         curves = _median_curves(fit, spec, keys)
     except InputError:  # the saved card's forward function is not available here
         curves = _ppc_median_curves(fit, bands, keys)
 
     multi = len(observables) > 1 or pair is not None
+    multi_colour = n_colours > 1
+    palette = _palette(fit, spec["colours"], n_colours)
+    # overlapping bands of several colour levels: one panel per (panel, colour) level instead
+    split = multi_colour and not multi and _bands_overlap(bands, observables[0], panel, n_colours)
+    if split:
+        cells = [(p, c) for p in range(len(panel_labels)) for c in range(n_colours)
+                 if np.any((panel == p) & (colour == c))]
+    else:
+        cells = [(p, None) for p in range(len(panel_labels))]
+    n_panels = len(cells)
+    transpose = False
     if multi:  # one row per observable (+ the pair row), one column per panel
         ncols, nrows = n_panels, len(observables) + (1 if pair else 0)
+        transpose = n_panels > 3  # many panels: one per row instead, the observables across
     else:  # one observable: panels wrapped into a near-square grid
         ncols = min(4, math.ceil(math.sqrt(n_panels)))
         nrows = math.ceil(n_panels / ncols)
-    fig = _new_figure(min(3.4 * ncols + 2.2, 18), 2.9 * nrows + 0.6)
-    rows = _grid(fig, nrows, ncols, n_panels, multi, len(observables))
+    gcols, grows = (nrows, ncols) if transpose else (ncols, nrows)  # as laid out
+    width = min(2.9 * gcols + 0.8, MAX_WIDTH)
+    title_lines = 2 if split and len(panel_labels) > 1 else 1
+    n_handles = 6 + (n_colours if multi_colour else 0)
+    fig = _new_figure(width, (0.7 * (width - 0.8) / gcols + 0.45 + 0.17 * title_lines) * grows
+                      + 0.2 * math.ceil(n_handles / 3) + 0.6)
+    rows = _grid(fig, nrows, ncols, n_panels, multi, len(observables), transpose)
     x_label = axis_label(spec["x"], units.get(spec["x"]))
     x_factor = _factor(units.get(spec["x"]))
-    multi_colour = len(colour_labels) > 1
-    reference_drawn = False
+    reference_drawn = markers_drawn = False
     for r, o in enumerate(observables):
         f = _factor(units.get(o))
         sub = bands[bands["observable"] == o]
-        for p in range(n_panels):
-            ax = rows[r][p]
-            for c in range(len(colour_labels)):
+        for k, (p, only) in enumerate(cells):
+            ax = rows[r][k]
+            for c in range(n_colours) if only is None else [only]:
                 rows_pc = sub[(sub["panel"] == p) & (sub["colour"] == c)]
                 if rows_pc.empty:
                     continue
-                col = _COLOURS[c % len(_COLOURS)] if multi_colour else _COLOURS[0]
+                col = palette[c]
                 agg = rows_pc.groupby("x", sort=True)[list(_BAND_COLUMNS)].mean()
                 xu = agg.index.to_numpy()
                 if len(xu) > 1:
@@ -489,10 +586,21 @@ def plot_ppc(fit, path=None):
                                 color=col, alpha=0.5, lw=3, capsize=0)
                 ax.scatter(rows_pc["x"], rows_pc["observed"], s=12, color=col, edgecolor="black",
                            linewidth=0.4, zorder=3, gid="data")
-                xs, ys = curves[p * len(colour_labels) + c]
-                ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
+                xs, ys, on_grid = curves[p * n_colours + c]
+                if on_grid:
+                    ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
+                else:  # other covariates vary within the panel: no curve through the data's x
+                    ax.plot(xs / x_factor, ys[o] / f, ls="", marker="_", ms=10, mew=2, color=col, zorder=4,
+                            gid="median")
+                    markers_drawn = True
+            if split:  # the other levels' medians, thin and grey, for comparison
+                for c in range(n_colours):
+                    if c != only and p * n_colours + c in curves:
+                        xs, ys, on_grid = curves[p * n_colours + c]
+                        ax.plot(xs / x_factor, ys[o] / f, color="0.75", lw=0.8, zorder=1,
+                                ls="-" if on_grid else "", marker="" if on_grid else "_", gid="other_median")
             if r == 0:  # one reference curve per panel, on a fine grid over the panel's x range
-                idx = np.flatnonzero(keys // len(colour_labels) == p)
+                idx = np.flatnonzero(panel == p)
                 x_si = np.asarray(fit.group("constant_data")[spec["x"]].values, dtype=float)[idx]
                 grid = np.linspace(x_si.min(), x_si.max(), _N_GRID) if idx.size else x_si
                 ref = _reference(spec, fit, idx, grid) if idx.size else None
@@ -503,13 +611,16 @@ def plot_ppc(fit, path=None):
             ax.set_ylabel(axis_label(o, units.get(o)))
             ax.set_xscale(spec["xscale"])
             ax.set_yscale(spec["yscale"])
-            if panel_labels[p] and (r == 0 or len(observables) == 1):
-                ax.set_title(panel_labels[p], fontsize=10)
+            title = panel_labels[p] if only is None else "\n".join(
+                t for t in (panel_labels[p], colour_labels[only]) if t)
+            if title and (r == 0 or len(observables) == 1):
+                ax.set_title(_wrap(title, ax), fontsize=MIN_FONT + 1)
     if pair:
-        _draw_pair_row(fit, rows[-1], pair, spec, units, panel, colour, curves, len(colour_labels))
+        _draw_pair_row(fit, rows[-1], pair, spec, units, panel, colour, curves, palette)
     for row in rows:
         for ax in row:
             ax.grid(alpha=0.25, lw=0.5)
+            ax.tick_params(labelsize=MIN_FONT + 1)
             for which in "xy":
                 if (ax.get_xscale() if which == "x" else ax.get_yscale()) == "log":
                     _log_ticks(ax, which)
@@ -517,38 +628,78 @@ def plot_ppc(fit, path=None):
         for ax in rows[0]:
             ax.label_outer()
     handles = [Line2D([], [], ls="", marker="o", mfc="0.5", mec="black", mew=0.4, ms=4, label="data"),
-               Line2D([], [], color="0.2", lw=1.6, label="posterior median"),
-               Patch(color="0.2", alpha=0.34, label="50% predictive"),
-               Patch(color="0.2", alpha=0.16, label="90% predictive")]
+               Line2D([], [], color="0.2", lw=1.6, label="posterior median")]
+    if markers_drawn:
+        handles.append(Line2D([], [], ls="", marker="_", ms=10, mew=2, color="0.2",
+                              label="posterior median at the data's x\n(other covariates vary)"))
+    handles += [Patch(color="0.2", alpha=0.34, label="50% predictive"),
+                Patch(color="0.2", alpha=0.16, label="90% predictive")]
+    clipped = {o: s for o, s in bands.attrs["below_floor"].items() if s > 0}
+    if clipped:
+        handles.append(Patch(color="none", label="bands clipped at 0\n(" + "; ".join(
+            f"{s:.1%} of {o.replace('_', ' ')} draws\nbelow 0 under {_noise(fit, o)} noise" for o, s in clipped.items())
+            + ")"))
+    if split:
+        handles.append(Line2D([], [], color="0.75", lw=0.8, label="other levels' medians"))
     if pair:
         handles.append(Line2D([], [], ls="", marker="o", mfc=_COLOURS[0], mec="none", alpha=0.4, ms=3,
                               label="predictive draws (pairs)"))
     if reference_drawn:
         handles.append(Line2D([], [], color="0.35", ls="--", lw=1.1, label="ball bearing, g(x) (eq. 2)"))
     if multi_colour:
-        handles += [Patch(color=_COLOURS[c % len(_COLOURS)], label=lab) for c, lab in enumerate(colour_labels)]
-    fig.legend(handles=handles, loc="outside right upper", fontsize=9, frameon=False)
-    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: posterior predictive", fontsize=11)
+        handles += [Patch(color=palette[c], label=lab) for c, lab in enumerate(colour_labels)]
+    # below the panels, as many columns as fit the width: never over the title or the data
+    longest = max(len(line) for h in handles for line in h.get_label().split("\n"))
+    ncols = max(1, min(len(handles), int(fig.get_figwidth() / (longest * 0.6 * MIN_FONT / 72 + 0.6))))
+    fig.legend(handles=handles, loc="outside lower center", fontsize=MIN_FONT, frameon=False, ncols=ncols)
+    _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: posterior predictive")
     return _finish(fig, path)
 
 
-def _draw_pair_row(fit, axes, pair, spec, units, panel, colour, curves, n_colours):
+def _palette(fit, columns, n):
+    """One colour per colour level: ordered numeric levels along viridis (dark to green, its
+    pale yellow end left out), categories in Okabe-Ito's colour-blind-safe set; both remain
+    distinct to deuteranopes and in greyscale (viridis) or by hue (Okabe-Ito)."""
+    if n <= 1:
+        return [_COLOURS[0]]
+    cd = fit.group("constant_data")
+    numeric = all(np.issubdtype(cd[c].dtype, np.number) for c in columns) and len(columns) == 1
+    if numeric or n > len(_COLOURS):
+        cmap = matplotlib.colormaps["viridis"]
+        return [matplotlib.colors.to_hex(cmap(v)) for v in np.linspace(0.0, 0.85, n)]
+    return list(_COLOURS[:n])
+
+
+def _noise(fit, observable):
+    return fit.attr("setup").get("noise", {}).get(observable, "normal")
+
+
+def _wrap(text, ax, fontsize=MIN_FONT + 1):
+    """Panel title wrapped to its axes' width (at ~0.6 em a character), line by line."""
+    import textwrap
+
+    width_in = ax.get_position().width * ax.figure.get_figwidth()
+    per_line = max(12, int(width_in * 72 / (0.6 * fontsize)))
+    return "\n".join(w for line in text.split("\n") for w in textwrap.wrap(line, per_line))
+
+
+def _draw_pair_row(fit, axes, pair, spec, units, panel, colour, curves, palette):
     """One observable against the other: data, joint predictive draws, median curve."""
     xo, yo = pair
     od = fit.group("observed_data")
     fx, fy = _factor(units.get(xo)), _factor(units.get(yo))
     px, py = _ppc_draws(fit, xo, 20), _ppc_draws(fit, yo, 20)
     for p, ax in enumerate(axes):
-        for c in range(n_colours):
+        for c in range(len(palette)):
             idx = np.flatnonzero((panel == p) & (colour == c))
             if not len(idx):
                 continue
-            col = _COLOURS[c % len(_COLOURS)] if n_colours > 1 else _COLOURS[0]
+            col = palette[c]
             ax.scatter(px[:, idx].ravel() / fx, py[:, idx].ravel() / fy, s=4, color=col, alpha=0.12,
                        lw=0, rasterized=True)
             ax.scatter(od[xo].values[idx] / fx, od[yo].values[idx] / fy, s=12, color=col,
                        edgecolor="black", linewidth=0.4, zorder=3)
-            _, ys = curves[p * n_colours + c]
+            _, ys, _ = curves[p * len(palette) + c]
             ax.plot(ys[xo] / fx, ys[yo] / fy, color=col, lw=1.6, zorder=4)
         ax.set_xlabel(axis_label(xo, units.get(xo)))
         ax.set_ylabel(axis_label(yo, units.get(yo)))
@@ -584,10 +735,16 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
         values = values[np.linspace(0, len(values) - 1, max_draws).astype(int)]
     mapv = fit.map
     d = len(slots)
-    size = 1.6 * d + 1.0
+    size = min(1.6 * d + 1.4, MAX_WIDTH)
     fig = Figure(figsize=(size, size))  # a fixed layout: constrained layout is slow on d*d axes
-    fig.subplots_adjust(left=0.8 / size + 0.02, bottom=0.7 / size + 0.02, right=0.98, top=1 - 0.45 / size,
-                        wspace=0.08, hspace=0.08)
+    # labels as "name\n[unit]"; with more than 5 parameters a cell is too small for a label
+    # along its side: x labels turned upright, y labels written across, margins to fit them
+    compact = d > 5
+    labels = [_slot_label(s).replace(" [", "\n[") for s in slots]
+    chars = max(len(line) for text in labels for line in text.split("\n"))
+    label_in = chars * 0.6 * MIN_FONT / 72 + 0.15 if compact else 2 * 1.3 * MIN_FONT / 72 + 0.1
+    fig.subplots_adjust(left=(0.55 + label_in) / size, bottom=(0.55 + label_in) / size, right=1 - 0.15 / size,
+                        top=1 - 0.6 / size, wspace=0.1, hspace=0.1)
     gs = fig.add_gridspec(d, d)
     log = [_use_log(s, values[:, k]) for k, s in enumerate(slots)]
     axes = np.full((d, d), None, dtype=object)
@@ -599,30 +756,35 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
                 v = values[:, i]
                 ax.hist(v, bins=np.geomspace(v.min(), v.max(), 40) if log[i] else 40, color=_COLOURS[0],
                         alpha=0.7)
-                ax.axvline(mapv[si["name"]], color="#d62728", lw=1)
+                ax.axvline(mapv[si["name"]], color=_MAP_COLOUR, lw=1)
                 if log[i]:
                     ax.set_xscale("log")
             else:
                 ax.scatter(values[:, j], values[:, i], s=1.5, alpha=0.25, color=_COLOURS[0], lw=0,
                            rasterized=True)
-                ax.plot(mapv[sj["name"]], mapv[si["name"]], marker="x", color="#d62728", ms=5)
+                ax.plot(mapv[sj["name"]], mapv[si["name"]], marker="x", color=_MAP_COLOUR, ms=5)
                 if log[j]:
                     ax.set_xscale("log")
                 if log[i]:
                     ax.set_yscale("log")
             if i == d - 1:
-                ax.set_xlabel(_slot_label(sj), fontsize=8)
+                ax.set_xlabel(labels[j], fontsize=MIN_FONT, rotation=90 if compact else 0)
             else:
                 ax.tick_params(labelbottom=False)
             if j == 0 and i > 0:
-                ax.set_ylabel(_slot_label(si), fontsize=8)
+                if compact:
+                    ax.set_ylabel(labels[i], fontsize=MIN_FONT, rotation=0, ha="right", va="center")
+                else:
+                    ax.set_ylabel(labels[i], fontsize=MIN_FONT)
             else:
                 ax.tick_params(labelleft=False)
             ax.minorticks_off()
-            ax.tick_params(labelsize=6)
+            ax.tick_params(labelsize=MIN_FONT)
+            ax.tick_params(axis="x", labelrotation=90)  # upright: never into the next column's
             for axis in (ax.xaxis, ax.yaxis):
-                if axis.get_scale() != "log":
-                    axis.set_major_locator(matplotlib.ticker.MaxNLocator(3))
+                if axis.get_scale() != "log":  # no label at a cell's edge, where it would meet the next
+                    axis.set_major_locator(matplotlib.ticker.MaxNLocator(3, prune="both"))
+                    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
             if i == j:
                 ax.set_yticks([])
     for j in range(d):  # the x range of each column is its marginal's
@@ -635,8 +797,8 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
         for j in range(i + 1):
             for which in "xy":
                 if (axes[i, j].get_xscale() if which == "x" else axes[i, j].get_yscale()) == "log":
-                    _log_ticks(axes[i, j], which, 3)
-    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: posterior draws (MAP in red)", fontsize=11)
+                    _log_ticks(axes[i, j], which, 3, sparse=True)
+    _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: posterior draws (MAP in orange-red)")
     return _finish(fig, path)
 
 
@@ -673,7 +835,7 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
             ax.set_yscale("log")
             _log_ticks(ax, "y")
         ax.set_ylabel(_slot_label(s), fontsize=8)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=MIN_FONT)
         ranks = _ranks(v)
         groups = np.array_split(np.arange(len(v)), min(n_groups, len(v)))
         bins = np.linspace(0, 1, 21)
@@ -684,7 +846,7 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
         axr.axhline(1.0, color="black", lw=0.6, ls=":")
         axr.set_ylim(0, None)
         axr.set_yticks([])
-        axr.tick_params(labelsize=7)
+        axr.tick_params(labelsize=MIN_FONT)
         if i < len(slots) - 1:
             ax.tick_params(labelbottom=False)
             axr.tick_params(labelbottom=False)
@@ -692,7 +854,7 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
                            f"{min(len(v), max_walkers)} of {sampler['nwalkers']} walkers shown")
     axes[-1, 1].set_xlabel(f"rank (fraction), {len(groups)} walker groups")
     axes[0, 1].set_title("rank histograms (flat = mixed)", fontsize=9)
-    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: traces", fontsize=11)
+    _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: traces")
     return _finish(fig, path)
 
 
@@ -709,7 +871,7 @@ def plot_rank(fit, path=None, *, var_names=None):
     except (ValueError, KeyError, TypeError):  # e.g. more panels than plot.max_subplots
         return plot_trace(fit, path, var_names=var_names)
     plt.close(fig)  # keep pyplot's registry clean; the Figure stays usable
-    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: rank ECDF per walker", fontsize=11)
+    _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: rank ECDF per walker")
     return _finish(fig, path)
 
 
@@ -761,15 +923,15 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
         ax.set_ylim(0, 1.08)
         ax.set_yticks([])
         ax.set_xlabel(_slot_label(s), fontsize=9)
-        ax.tick_params(labelsize=7)
+        ax.tick_params(labelsize=MIN_FONT)
         c = summary.loc[s["name"], "contraction"] if s["name"] in summary.index else np.nan
-        ax.set_title(f"{s['name']}: contraction {c:.2f}", fontsize=9)
+        ax.set_title(_wrap(f"{s['name']}: contraction {c:.2f}", ax, 9), fontsize=9)
     for row in axes:
         row[0].set_ylabel("density (scaled to peak)", fontsize=8)
     fig.legend(handles=[Patch(color=_COLOURS[0], alpha=0.55, label="posterior"),
                         Line2D([], [], color="black", lw=1.2, label="prior")],
                loc="outside right upper", fontsize=9, frameon=False)
-    fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: prior vs posterior", fontsize=11)
+    _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: prior vs posterior")
     return _finish(fig, path)
 
 
@@ -882,8 +1044,8 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
         _log_ticks(ax)
     ax.set_xlabel(_param_label(parameter, unit))
     ax.grid(axis="x", alpha=0.3, lw=0.5)
-    ax.legend(fontsize=8, frameon=False, loc="best")
-    ax.set_title(f"{parameter} across fits and conditions", fontsize=10)
+    fig.legend(fontsize=MIN_FONT, frameon=False, loc="outside lower center", ncols=2)
+    _suptitle(fig, f"{parameter} across fits and conditions")
     return _finish(fig, path)
 
 
@@ -933,5 +1095,5 @@ def plot_comparison(table, path=None, *, title=None):
         ax.set_xlabel(label)
         ax.grid(axis="x", alpha=0.3, lw=0.5)
     axes[0].set_yticks(y, [str(i) for i in table.index], fontsize=9)
-    fig.suptitle(title or "model comparison (higher is better; bars: ± 1 standard error)", fontsize=10)
+    _suptitle(fig, title or "model comparison (higher is better; bars: ± 1 standard error)")
     return _finish(fig, path)

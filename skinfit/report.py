@@ -52,9 +52,38 @@ def _fmt(value):
 
 
 def _table(df, index_name):
-    """A DataFrame as {columns, rows} of formatted cells, the index as first column."""
+    """A DataFrame as {columns, rows, text} of formatted cells, the index as first column;
+    ``text[k]`` is True for a column of words (left-aligned and wrapped in the page)."""
     return {"columns": [index_name] + [str(c) for c in df.columns],
-            "rows": [[_fmt(i)] + [_fmt(v) for v in row] for i, row in zip(df.index, df.itertuples(index=False))]}
+            "rows": [[_fmt(i)] + [_fmt(v) for v in row] for i, row in zip(df.index, df.itertuples(index=False))],
+            "text": [True] + [not (pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c]))
+                              for c in df.columns]}
+
+
+def level_names(fit):
+    """Summary row name -> the same name with its condition spelled out, for every parameter or
+    derived quantity indexed by a condition: ``gamma[0.5]`` -> ``gamma[actuation_force=0.5 N]``,
+    ``beta_h[M10]`` -> ``beta_h[material=M10]`` (levels in the units the data came in)."""
+    units = fit.attr("units")
+    out = {}
+    for group in ("posterior", "derived"):
+        try:
+            ds = fit.group(group)
+        except (KeyError, ValueError):
+            continue
+        for var in ds.data_vars:
+            dims = [d for d in ds[var].dims if d not in ("chain", "draw")]
+            if len(dims) != 1:
+                continue
+            cols = dims[0].split(",")
+            for level in ds[dims[0]].values:
+                parts = str(level).split(",")
+                if len(parts) != len(cols):
+                    continue
+                named = ", ".join(f"{c}={v}" + (f" {units[c]}" if units.get(c) not in (None, "1", "-") else "")
+                                  for c, v in zip(cols, parts))
+                out[f"{var}[{level}]"] = f"{var}[{named}]"
+    return out
 
 
 def _markdown(table):
@@ -140,14 +169,15 @@ def fit_diagnostics(fit, summary=None):
         f"support ({condition}): the posterior presses against the model's limit")
     # the fit's own guard rails (skinfit.guardrails), as stored in the file; their messages are
     # the issues, the bound row above them only summarises
-    bounds = [w["parameter"] for w in fit.warnings if w["check"] == "bound"]
+    bounds = [w.get("parameter") or "" for w in fit.warnings if w.get("check") == "bound"]
     add("posterior mass on a prior bound", "; ".join(bounds) or "none",
         f"<= {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound", "WARN" if bounds else "ok")
-    for w in fit.warnings:
-        if w["check"] not in ("convergence", "acceptance"):  # already rows above
-            add(f"guard rail: {w['check']}" + (f" ({w['parameter']})" if w["parameter"] else ""),
-                "tripped", "see skinfit.guardrails", w["status"], w["message"])
-    if "misfit" in fit.attrs:  # skinfit.misfit; its warnings are issues through the guard rails above
+    for w in fit.warnings:  # whatever the fit recorded: guard rails, model-fit (misfit) checks...
+        if w.get("check") not in ("convergence", "acceptance"):  # already rows above
+            add(f"guard rail: {w.get('check', 'unnamed')}" + (f" ({w['parameter']})" if w.get("parameter") else ""),
+                "tripped", "recorded with the fit (Fit.warnings)", w.get("status", "WARN"),
+                w.get("message", json.dumps(w, default=str)))
+    if "misfit" in fit.attrs:  # skinfit.misfit; its warnings are issues through the rows above
         r = fit.attr("misfit")
         bad = any(c["warn"] for c in r["checks"]) or bool(r.get("pareto_k") and r["pareto_k"]["warn"])
         rows.append(("fit to the data: smallest posterior-predictive p", min(c["p"] for c in r["checks"]),
@@ -229,6 +259,98 @@ def _figure(make, path):
     return None
 
 
+#: From this many fits of one model on, each fit's section draws only its predictive check.
+MANY_FITS = 4
+#: Processes that draw a report's figures (at most; one per core).
+MAX_FIGURE_WORKERS = 4
+_FITS = []  # the fits being drawn, inherited by forked worker processes
+
+
+def fit_hash(fit):
+    """sha256 of what a fit's figures are drawn from: the arrays of every group but the two
+    computed from the posterior and the seeds in the attributes (pointwise log-likelihood and
+    predictive draws, up to 200 MB), and the root attributes but ``evidence`` (which a
+    comparison adds to a saved file without changing a figure)."""
+    import hashlib
+
+    from .fit import DEFERRED
+
+    h = hashlib.sha256()
+    tree = fit.idata
+    for name in sorted(set(tree.children) - set(DEFERRED)):
+        ds = tree[name].to_dataset()
+        for var in sorted(ds.variables):
+            h.update(f"{name}/{var}".encode())
+            h.update(np.ascontiguousarray(ds[var].values).tobytes() if ds[var].dtype != object
+                     else repr(ds[var].values.tolist()).encode())
+    attrs = {k: v for k, v in tree.attrs.items() if k != "evidence"}
+    h.update(json.dumps(attrs, sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
+def _settings_hash():
+    """The figures' code: plots.py and this module (an edited plot draws again)."""
+    import hashlib
+
+    return hashlib.sha256(Path(plots.__file__).read_bytes() + Path(__file__).read_bytes()).hexdigest()[:16]
+
+
+def _render_one(job):
+    """Draw one figure job into its PNG and PDF (top level: runs in a forked worker)."""
+    fit = _FITS[job["fit"]]
+    return _figure(lambda: getattr(plots, job["func"])(fit, *job["args"]), job["path"])
+
+
+def render_figures(fits, jobs, figdir):
+    """Draw figure ``jobs`` ({fit: index into fits, func: plots function name, args, path}),
+    each once per input: a figure whose fit content (:func:`fit_hash`), function, arguments
+    and plotting code are those recorded in ``figdir/.figures.json`` beside an existing file
+    is kept. The rest are drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this
+    one where fork is unavailable). Returns one error text or None per job."""
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    global _FITS
+    manifest_path = figdir / ".figures.json"
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except (OSError, ValueError):
+        manifest = {}
+    settings = _settings_hash()
+    hashes = {}
+    keys = []
+    for job in jobs:
+        if job["fit"] not in hashes:
+            hashes[job["fit"]] = fit_hash(fits[job["fit"]])
+        keys.append(f"{hashes[job['fit']]}:{job['func']}:{json.dumps(job['args'])}:{settings}")
+    todo = [i for i, (job, key) in enumerate(zip(jobs, keys))
+            if manifest.get(job["path"].name) != key or not job["path"].exists()
+            or not job["path"].with_suffix(".pdf").exists()]
+    errors = [None] * len(jobs)
+    _FITS = fits
+    workers = min(MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
+    try:
+        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+            for fit in fits:  # each worker draws from the complete tree, computed once here
+                fit.complete()
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+                for i, error in zip(todo, pool.map(_render_one, [jobs[i] for i in todo])):
+                    errors[i] = error
+        else:
+            for i in todo:
+                errors[i] = _render_one(jobs[i])
+    finally:
+        _FITS = []
+    for i in todo:
+        if errors[i] is None:
+            manifest[jobs[i]["path"].name] = keys[i]
+        else:
+            manifest.pop(jobs[i]["path"].name, None)
+    manifest_path.write_text(json.dumps(manifest, indent=0, sort_keys=True))
+    return errors
+
+
 def _write_png(fig, path):
     """PNG quantised to 256 colours: a third of the size, no visible change for line art."""
     import io
@@ -240,9 +362,11 @@ def _write_png(fig, path):
     image = Image.open(io.BytesIO(buffer.getvalue())).convert("RGB")
     image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
         path, format="PNG", optimize=True)
+    fig.savefig(Path(path).with_suffix(".pdf"))  # vector (dense scatter rasterised), for papers
 
 
-def write_report(fits, out_dir, *, title=None, comparison=None, population=None):
+def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
+                 contrasts=None):
     """Write a self-contained static report of ``fits`` into ``out_dir``.
 
     Parameters
@@ -257,6 +381,13 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
     population : mapping parameter -> distribution, optional
         Population distributions drawn on the forest plots (see :func:`skinfit.plots.plot_forest`);
         also keyed by model id first, or a DataFrame indexed by parameter.
+    populations : dict model id -> population result, optional
+        Population results (:func:`skinfit.population.population`) of the fits of a model,
+        shown with their hyper-parameters and shrunk beside separate estimates
+        (:func:`skinfit.report_groups.population_section`); their population medians are
+        drawn on the forest plots.
+    contrasts : dict title -> DataFrame, optional
+        Contrast tables (:mod:`skinfit.contrasts`), shown with each pair's probability of direction.
 
     Returns
     -------
@@ -272,7 +403,10 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
     items = _as_fits(fits)
     if not items:
         raise InputError("skinfit report", "no fits given")
-    issues_all, sections = [], []
+    issues_all, sections, jobs = [], [], []
+    per_model = {}
+    for _, fit in items:
+        per_model[fit.model_id] = per_model.get(fit.model_id, 0) + 1
     from .run_labels import run_labels
 
     # two runs of one model on one dataset: named by the options that differ
@@ -286,24 +420,25 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
         units = plots.parameter_units(fit)
         shown = summary.drop(columns="unit", errors="ignore")
         shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
+        shown.index = [level_names(fit).get(n, n) for n in shown.index]
         where = f"{labels[key]} on {fit.dataset_id}"
         figures = []
-        for name, make, caption in _FIGURES:
+        # a model fitted to many subjects: each subject's section keeps its predictive check; the
+        # parameters are compared across subjects in one forest plot each (the figures thinned)
+        kinds = _FIGURES if per_model[fit.model_id] < MANY_FITS else _FIGURES[:1]
+        for name, make, caption in kinds:
             path = figdir / f"{key}_{name}.png"
-            error = _figure(lambda make=make: make(fit), path)
-            if error:
-                issues.append(("WARN", error))
-            else:
-                figures.append({"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})"})
+            figures.append({"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
+                            "pdf": f"figures/{path.stem}.pdf"})
+            jobs.append({"fit": len(sections), "func": make.__name__, "args": (), "path": path,
+                         "entry": figures[-1]})
         for pname, dims in _split_parameters(fit).items():
             path = figdir / f"{key}_forest_{pname}.png"
-            error = _figure(lambda pname=pname: plots.plot_forest(fit, pname), path)
-            if error:
-                issues.append(("WARN", error))
-            else:
-                figures.append({"file": f"figures/{path.name}",
-                                "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
-                                "alt": f"forest plot of {pname} per {dims} ({where})"})
+            figures.append({"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
+                            "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
+                            "alt": f"forest plot of {pname} per {dims} ({where})"})
+            jobs.append({"fit": len(sections), "func": "plot_forest", "args": (pname,), "path": path,
+                         "entry": figures[-1]})
         issues_all += [{"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues]
         prov = _provenance(fit)
         sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
@@ -311,14 +446,29 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
                          "diagnostics": _table(diag, "check"), "figures": figures,
                          "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
 
-    across = _across_fits(items, figdir, population, issues_all)
+    for job, error in zip(jobs, render_figures([fit for _, fit in items], jobs, figdir)):
+        if error:  # listed at the top and in its section, the figure left out
+            section = sections[job["fit"]]
+            section["figures"].remove(job["entry"])
+            section["issues"].append(("WARN", error))
+            issues_all.append({"status": "WARN", "fit": section["key"], "where": section["where"], "text": error})
+    across = _across_fits(items, figdir, population, issues_all, populations or {}, out)
+    contrast_tables = []
+    for name, table in (contrasts or {}).items():
+        from .report_groups import contrast_section
+
+        stem = "contrasts_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
+        shown = contrast_section(table)
+        shown.to_csv(out / f"{stem}.csv", index=False)
+        contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
+                                "table": _table(shown.head(20).set_index("A"), "A")})
     comparisons = []
     tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
     for name, table in tables.items():
         stem = "comparison" + (f"_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}" if name else "")
         table.to_csv(out / f"{stem}.csv")
         entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
-                 "csv": f"{stem}.csv", "figure": None}
+                 "csv": f"{stem}.csv", "figure": None, "note": ranking_note(table)}
         path = figdir / f"{stem}.png"
         error = _figure(lambda table=table: plots.plot_comparison(table), path)
         if error:
@@ -331,7 +481,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
     n_fail = sum(i["status"] == "FAIL" for i in issues_all)
     context = {"title": title or "skinfit report", "version": __version__, "sections": sections,
                "issues": issues_all, "n_fail": n_fail, "n_warn": len(issues_all) - n_fail,
-               "comparisons": comparisons, "across": across,
+               "comparisons": comparisons, "across": across, "contrasts": contrast_tables,
                "n_fits": len(sections), "n_converged": sum(s["converged"] for s in sections),
                "matplotlib": _version("matplotlib"), "arviz": _version("arviz")}
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
@@ -341,6 +491,27 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
     index.write_text(env.get_template("report.html.j2").render(**context), encoding="utf-8")
     (out / "summary.md").write_text(_summary_md(context), encoding="utf-8")
     return index
+
+
+def ranking_note(table):
+    """A sentence when log evidence and LOO rank the models differently, else None.
+
+    ``table`` as :func:`skinfit.compare` returns it (columns ``model`` or index, ``log_z``,
+    ``elpd_loo``)."""
+    if not {"log_z", "elpd_loo"} <= set(table.columns):
+        return None
+    t = table.set_index("model") if "model" in table.columns else table
+    by_z = list(t["log_z"].sort_values(ascending=False).index)
+    by_loo = list(t["elpd_loo"].sort_values(ascending=False).index)
+    if by_z == by_loo:
+        return None
+    return (f"Evidence and LOO rank these models differently: by log Z {' > '.join(map(str, by_z))}; "
+            f"by ELPD (LOO) {' > '.join(map(str, by_loo))}. The evidence Z = p(data | model) averages the "
+            "likelihood over the prior, so it rewards a model whose priors put mass where the data are and "
+            "penalises wide priors; LOO's ELPD scores how well the fitted posterior predicts each left-out row, "
+            "whatever the prior. Where they disagree, the winner by evidence is favoured as a whole-model "
+            "explanation under these priors, the winner by LOO as a predictor of new rows like these; "
+            "check the standard errors before reading either difference.")
 
 
 def _version(pkg):
@@ -361,8 +532,12 @@ def _split_parameters(fit):
             if set(post[v].dims) - {"chain", "draw"}}
 
 
-def _across_fits(items, figdir, population, issues):
-    """Forest plots of each parameter across the fits of one model (subjects, conditions)."""
+def _across_fits(items, figdir, population, issues, populations, out_dir):
+    """Per model with several fits (subjects, conditions): a table and a forest plot of each
+    parameter across the fits, labelled by subject as written in the data, and the model's
+    population result when given."""
+    from .report_groups import population_section, subjects_section
+
     by_model = {}
     for key, fit in items:
         by_model.setdefault(fit.model_id, []).append((key, fit))
@@ -370,11 +545,35 @@ def _across_fits(items, figdir, population, issues):
     for model_id, group in by_model.items():
         if len(group) < 2:
             continue
+        safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", model_id)
+        subj = subjects_section(dict(group))
+        labelled = {subj["labels"][k]: f for k, f in group}
+        if len(labelled) < len(group):  # the same subject label twice: keep the unique keys
+            labelled = dict(group)
+        tables = []
+        for pname, table in subj["tables"].items():
+            stem = f"subjects_{safe}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', pname)}"
+            table.to_csv(out_dir / f"{stem}.csv")
+            tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": _table(table, "subject")})
+        pop_result = populations.get(model_id)
+        pop_info = population_section(pop_result) if pop_result is not None else None
+        if pop_info is not None:
+            pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
+            pop_tables = {"hyper": _table(pop_info["hyper"].reset_index().set_index("parameter"), "parameter"),
+                          "csv": f"population_{safe}.csv",
+                          "subjects": [{"parameter": k, "table": _table(v, "subject")}
+                                       for k, v in pop_info["subjects"].items()],
+                          "hyperpriors": {k: str(v) for k, v in pop_info["hyperpriors"].items()},
+                          "sampler": {k: str(v) for k, v in pop_info["sampler"].items() if k != "tau"}}
+        else:
+            pop_tables = None
         figures = []
         for pname in group[0][1].group("posterior").data_vars:
-            path = figdir / f"across_{re.sub(r'[^A-Za-z0-9_.-]+', '_', model_id)}_{pname}.png"
+            path = figdir / f"across_{safe}_{pname}.png"
             pop = _population_for(population, model_id, pname)
-            fits = {k: f for k, f in group}
+            if pop is None and pop_info is not None:
+                pop = pop_info["intervals"].get(pname)
+            fits = labelled
             error = _figure(lambda pname=pname, pop=pop, fits=fits: plots.plot_forest(fits, pname, population=pop),
                             path)
             if error:
@@ -384,7 +583,8 @@ def _across_fits(items, figdir, population, issues):
                                                               else "")
             figures.append({"file": f"figures/{path.name}", "caption": caption,
                             "alt": f"forest plot of {pname} across the fits of {model_id}"})
-        out.append({"model_id": model_id, "fits": [k for k, _ in group], "figures": figures})
+        out.append({"model_id": model_id, "fits": list(labelled), "figures": figures, "tables": tables,
+                    "population": pop_tables})
     return out
 
 
@@ -399,11 +599,21 @@ def _summary_md(ctx):
         lines.append("All fits passed their diagnostics.")
     for c in ctx["comparisons"]:
         lines += ["", f"## Model comparison: {c['name']}", "", _markdown(c["table"]), "", f"CSV: `{c['csv']}`"]
+        if c["note"]:
+            lines += ["", f"**{c['note']}**"]
         if c["figure"]:
             lines += ["", f"![{c['figure']['alt']}]({c['figure']['file']})"]
     for a in ctx["across"]:
         lines += ["", f"## {a['model_id']} across fits: {', '.join(a['fits'])}", ""]
+        for tb in a["tables"]:
+            lines += ["", f"### {tb['parameter']} per subject", "", _markdown(tb["table"])]
+        if a["population"]:
+            lines += ["", "### Population", "", _markdown(a["population"]["hyper"])]
+            for tb in a["population"]["subjects"]:
+                lines += ["", f"#### {tb['parameter']}: separate and shrunk", "", _markdown(tb["table"])]
         lines += [f"![{f['alt']}]({f['file']})" for f in a["figures"]]
+    for c in ctx["contrasts"]:
+        lines += ["", f"## Contrasts: {c['name']}", "", _markdown(c["table"]), "", f"CSV: `{c['csv']}`"]
     for s in ctx["sections"]:
         lines += ["", f"## {s['where']}", "", f"Produced by {s['prov_line']}.", "",
                   f"Model: {s['prov']['model_title']} ({s['prov']['model_source']}).", "",
@@ -467,14 +677,17 @@ def cli_report(args):
     from .fit import load_fit
 
     from .groups import data_drift
+    from .report_groups import group_analyses
 
     runs = _collect_runs(args.runs)
     fits = [load_fit(p) for p in runs]
-    for message in data_drift(list(zip(runs, fits))):  # issue 21: never a stale result unannounced
+    for message in data_drift(list(zip(runs, fits))):  # never a stale result unannounced
         print(f"skinfit report: warning: {message}", file=sys.stderr)
     items = _as_fits(fits)
     comparison = _comparisons(items)
-    index = write_report(dict(items), args.out, comparison=comparison)
+    populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr))
+    index = write_report(dict(items), args.out, comparison=comparison, populations=populations,
+                         contrasts=contrasts)
     if getattr(args, "json", False):
         import json
 

@@ -32,7 +32,6 @@ import time
 import warnings
 from dataclasses import dataclass
 
-import arviz as az
 import emcee
 import numpy as np
 
@@ -407,7 +406,9 @@ def _check(chain, ess_target, rhat_max, min_tau_multiple, burn_factor, keep_tota
             draws = natural(draws.reshape(-1, d)).reshape(draws.shape)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            rhat = float(np.max(az.rhat(draws.transpose(1, 0, 2), chain_axis=0, draw_axis=1)))
+            from arviz_stats import rhat as az_rhat
+
+            rhat = float(np.max(az_rhat(draws.transpose(1, 0, 2), chain_axis=0, draw_axis=1)))
         if not rhat <= rhat_max:
             reasons.append(f"max R-hat {rhat:.3f} > {rhat_max}")
     return tau, burn, ess, rhat, thin, reasons

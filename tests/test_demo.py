@@ -11,8 +11,13 @@ def test_plan_covers_every_shipped_dataset_with_its_variants():
     plan = demo_plan(seed=1)
     for ds_id in skinfit.list_datasets():
         model = skinfit.load_model(skinfit.load_dataset(ds_id).model)
-        fitted = [p["model"] for p in plan if p["dataset"] == ds_id]
+        fitted = [p["model"] for p in plan if p["dataset"] == ds_id and not p.get("group")]
         assert fitted == [model.id, *model.variants]
+    # the contact-area model on every subject (S01 with the variants above), as --by subject
+    subjects = sorted(p["rows"]["subject"] for p in plan if p["dataset"] == "contact_area_synthetic"
+                      and p["model"] == "contact_area")
+    frame = skinfit.load_dataset("contact_area_synthetic").frame
+    assert subjects == sorted(frame["subject"].astype(str).unique()) and len(subjects) == 13
     seeds = [p["seed"] for p in plan]
     assert len(set(seeds)) == len(seeds)
     assert [p["seed"] for p in demo_plan(seed=1)] == seeds != [p["seed"] for p in demo_plan(seed=2)]

@@ -106,7 +106,7 @@ def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_p
         fig = func(fit, tmp_path / f"{name}.png")
         _written(tmp_path / f"{name}.png")
         xlabels, ylabels = _labels(fig)
-        shown = xlabels | ylabels
+        shown = {label.replace("\n", " ") for label in xlabels | ylabels}  # "name\n[unit]" in the corner plot
         wanted = list(expected.values())[:10] if name == "pair" else expected.values()
         missing = [w for w in wanted if w not in shown]
         assert not missing, f"{name}: no axis labelled {missing}"
@@ -240,7 +240,8 @@ def test_card_plot_table_sets_panels_and_colours(ea_fit):
     assert "[plot]" not in ea_fit.idata.attrs["model_card"]
     fig = plots.plot_ppc(skinfit.Fit(tree))
     visible = [a for a in fig.axes if a.get_visible()]
-    assert len(visible) == 1
+    # one panel, or, as the voltage levels' bands overlap, one panel per level
+    assert len(visible) == 1 or [a.get_title() for a in visible] == [f"voltage = {v} V" for v in range(0, 201, 25)]
     legend = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "voltage = 0 V" in legend and "voltage = 200 V" in legend
 
@@ -370,3 +371,71 @@ def test_reference_curve_of_the_wavy_surface(standin, tmp_path):
         x = np.asarray(ref.get_xdata())
         np.testing.assert_allclose(ref.get_ydata(), -2.0 * (2 * np.pi / 30) * np.sin(2 * np.pi * x / 30), atol=1e-12)
     assert "ball bearing, g(x) (eq. 2)" in [t.get_text() for t in fig.legends[0].get_texts()]
+
+
+# ---- layout: measured on the drawn figures at their saved size -----------------------------------
+from layout import layout_problems  # noqa: E402  (tests/layout.py)
+
+FIGURES = [("ppc", plots.plot_ppc), ("pair", plots.plot_pair), ("trace", plots.plot_trace),
+           ("prior_posterior", plots.plot_prior_posterior)]
+
+
+@pytest.mark.parametrize("model,dataset", CASES, ids=[f"{m}-{d}" for m, d in CASES])
+def test_figures_keep_text_inside_the_canvas_unoverlapped_and_at_least_8pt(model, dataset, fits, tmp_path):
+    fit = fits(model, dataset)
+    for name, func in FIGURES:
+        fig = func(fit, tmp_path / f"{name}.png")
+        assert fig.get_figwidth() <= plots.MAX_WIDTH + 1e-9, f"{name}: wider than the report shows at full size"
+        problems = layout_problems(fig)
+        assert not problems, f"{name}: " + "; ".join(problems[:6])
+
+
+def test_layout_check_finds_clipped_overlapping_and_small_text():
+    """Negative control: the checker flags what it is meant to flag."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3, 2))
+    ax = fig.subplots()
+    ax.set_title("a title far too long for a figure three inches wide, cut at both ends of it")
+    ax.text(0.5, 0.5, "one", fontsize=10)
+    ax.set_xlabel("small", fontsize=6)
+    fig.text(0.1, 0.9, "overlapping text", fontsize=10)
+    fig.text(0.12, 0.9, "overlapping text", fontsize=10)
+    problems = " | ".join(layout_problems(fig))
+    assert "outside the canvas: 'axes title'" in problems
+    assert "6.0 pt < 8.0 pt: 'x label'" in problems
+    assert "overlap: 'figure text'" in problems
+
+
+def test_long_titles_wrap_to_the_figure_width(ea_fit):
+    tree = ea_fit.idata.copy()
+    tree.attrs["dataset_id"] = "a_dataset_with_a_long_name_as_users_write_them[subject=S01,condition=dry]"
+    tree.attrs["model_id"] = "contact_area_hertz_with_a_long_name"
+    fig = plots.plot_ppc(tree)
+    assert "\n" in fig._suptitle.get_text()
+    assert not layout_problems(fig)
+
+
+def test_bands_of_a_nonnegative_observable_stop_at_zero(fits):
+    fit = fits("ultrasonic", "ultrasonic_synthetic")
+    bands = plots.ppc_bands(fit)
+    draws = fit.group("posterior_predictive")["friction_coefficient"].values
+    assert bands[["q05", "q25", "q50", "q75", "q95"]].to_numpy().min() >= 0
+    # the share stated on the figure is the share of predictive draws below 0
+    assert bands.attrs["below_floor"]["friction_coefficient"] == pytest.approx(float(np.mean(draws < 0)))
+
+
+def test_overlapping_colour_levels_get_a_panel_each(fits):
+    fit = fits("ultrasonic", "ultrasonic_synthetic")
+    spec = plots.plot_spec(fit)
+    fig = plots.plot_ppc(fit)
+    bands = plots.ppc_bands(fit)
+    n_colour, n_panel = len(bands.attrs["colour_labels"]), len(bands.attrs["panel_labels"])
+    assert spec["colours"] and n_colour > 2
+    titled = [a for a in fig.axes if a.get_visible() and a.get_title()]
+    assert len(titled) == n_colour * n_panel
+    # each panel draws one level's bands (one 90% band) and its data in one colour
+    for ax in titled:
+        assert len([c for c in ax.collections if c.get_gid() == "band90"]) == 1
+        (data,) = [c for c in ax.collections if c.get_gid() == "data"]
+        assert len({tuple(np.round(fc, 3)) for fc in data.get_facecolors()}) == 1

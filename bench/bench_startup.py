@@ -1,0 +1,93 @@
+"""Whole-process wall times of skinfit's commands beside a bare ``python -c pass``.
+
+Each command runs ``--repeats`` times as a fresh process, the commands interleaved (so a
+burst of load from other jobs hits all of them alike); the table gives the median and the
+minimum, and the largest cumulative imports of each (``python -X importtime``).
+
+    .venv/bin/python bench/bench_startup.py [--repeats 7] [--out bench/results/startup.md]
+
+``--without dask`` rows run the same command with ``dask`` made unimportable, as on an
+installation without the ``dask`` extra: xarray's netCDF writer imports ``dask.distributed``
+(~0.5-0.8 s) to look for a distributed scheduler whenever dask is installed.
+"""
+
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from common import machine_info, machine_text  # noqa: E402
+
+PY = sys.executable
+NO_DASK = "import sys; sys.modules['dask'] = None; "
+
+
+def commands(tmp):
+    fit = ["fit", "electroadhesion", "electroadhesion_synthetic", "--out", str(Path(tmp) / "run"), "--seed", "1",
+           "--quiet"]
+    cli = "from skinfit.cli import main; sys.exit(main({!r}))"
+    return [
+        ("python -c pass", [PY, "-c", "pass"], None),
+        ("import skinfit", [PY, "-c", "import skinfit"], "< 1 s"),
+        ("skinfit models", [PY, "-m", "skinfit", "models"], "< 0.5 s"),
+        ("skinfit fit electroadhesion electroadhesion_synthetic --out X (summary and saved file)",
+         [PY, "-m", "skinfit", *fit], "< 2 s"),
+        ("the same fit, without dask installed", [PY, "-c", "import sys; " + NO_DASK + cli.format(fit)], "< 2 s"),
+    ]
+
+
+def importtime(cmd, top=6):
+    """The largest cumulative top-level imports of a command (``-X importtime``), in ms."""
+    out = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], capture_output=True, text=True).stderr
+    rows = []
+    for line in out.splitlines():
+        parts = line.split("|")
+        if len(parts) == 3 and parts[1].strip().isdigit():
+            name = parts[2].rstrip()
+            depth = (len(name) - len(name.lstrip())) // 2
+            if depth <= 1:
+                rows.append((int(parts[1]) / 1000, name.strip()))
+    return sorted(rows, reverse=True)[:top]
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "startup.md"))
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        cmds = commands(tmp)
+        subprocess.run(cmds[3][1], capture_output=True, check=True)  # compile .pyc files, warm the disk cache
+        times = {name: [] for name, _, _ in cmds}
+        for _ in range(args.repeats):
+            for name, cmd, _ in cmds:
+                t0 = time.perf_counter()
+                subprocess.run(cmd, capture_output=True, check=True)
+                times[name].append(time.perf_counter() - t0)
+        imports = {name: importtime(cmd) for name, cmd, _ in cmds[1:4]}
+    bare = statistics.median(times["python -c pass"])
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = ["# Start-up: whole-process wall times of skinfit's commands", "",
+             f"`.venv/bin/python bench/bench_startup.py --repeats {args.repeats}` - {stamp}", "",
+             machine_text(machine_info()), "",
+             f"Each command run {args.repeats} times as a new process, the commands interleaved; median and "
+             "minimum wall time, and the median less the bare interpreter's.", "",
+             "| command | median s | min s | median - python -c pass s | target |", "|---|---|---|---|---|"]
+    for name, _, target in cmds:
+        t = times[name]
+        lines.append(f"| {name} | {statistics.median(t):.2f} | {min(t):.2f} | "
+                     f"{statistics.median(t) - bare:.2f} | {target or ''} |")
+    lines += ["", "Largest imports (`python -X importtime`, cumulative ms, top level and one below):", ""]
+    for name, rows in imports.items():
+        lines.append(f"- {name}: " + ", ".join(f"{mod} {ms:.0f}" for ms, mod in rows))
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
