@@ -295,7 +295,7 @@ def build_parser():
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_lazy("skinfit.compare", "cli_compare"))
     s = sub.add_parser("report", help="write a self-contained static HTML report of fits")
-    s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
+    s.add_argument("runs", nargs="+", help="run directories or fit.nc files, and folders written by `skinfit design --out` (a section each)")
     s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
     s.add_argument("--json", action="store_true", help="print the report's path and fits as JSON")
     s.set_defaults(func=_lazy("skinfit.report", "cli_report"))
@@ -324,9 +324,21 @@ def build_parser():
     s.add_argument("--jobs", type=_COUNT, help="parallel fits (default: one per core)")
     s.add_argument("--dataset", action="append", help="only this shipped dataset (repeatable)")
     s.set_defaults(func=_lazy("skinfit.demo", "cli_demo"))
-    from .design import add_parser as _design_parser
-
-    _design_parser(sub, _lazy)
+    s = sub.add_parser("design", help="which measurements next: rank candidate conditions by expected "
+                                      "information gain and propose a plan")
+    s.add_argument("model", help="model id (models/<id>.toml)")
+    s.add_argument("--candidates", required=True, help="TOML grid or list of candidate conditions, user units")
+    s.add_argument("--n", type=_COUNT, default=24, help="measurements in the plan (default 24)")
+    s.add_argument("--from", dest="from_fit", help="a saved fit (fit.nc or run directory): start from its posterior")
+    s.add_argument("--params", help="target parameters, comma-separated (default all)")
+    s.add_argument("--discriminate", nargs="+", metavar="MODEL", help="competing models: plan to tell them apart")
+    s.add_argument("--baseline", help="dataset whose design is the baseline (default: the fit's or the model's)")
+    s.add_argument("--sigma", type=float, help="noise sd (default: the fit's posterior median or the prior median)")
+    s.add_argument("--outer", type=_COUNT, default=400, help="outer Monte Carlo draws (default 400)")
+    s.add_argument("--inner", type=_COUNT, default=400, help="inner Monte Carlo draws (default 400)")
+    s.add_argument("--seed", type=_SEED, default=0, help="seed of every Monte Carlo draw (recorded; default 0)")
+    s.add_argument("--out", help="directory for plan.csv, candidates.csv, comparison.csv, sd.csv, eig.png")
+    s.set_defaults(func=_lazy("skinfit.design", "cli_design"))
     return p
 
 

@@ -54,7 +54,7 @@ from .errors import InputError
 from .units import UNITS, dimension, to_si
 
 __all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
-           "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "cli_design"]
+           "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "load_design", "cli_design"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 #: (outer x inner x candidate) cells per vectorised block of the nested estimators
@@ -737,16 +737,20 @@ class DesignResult:
         return "\n".join(lines)
 
     def write(self, out):
-        """plan.csv (ready to run), candidates.csv, comparison.csv, sd.csv, design.json, eig.png."""
+        """plan.csv (ready to run), candidates.csv, baseline.csv, comparison.csv, sd.csv,
+        design.json (settings and what :func:`load_design` needs), eig.png."""
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         self.plan.to_csv(out / "plan.csv", index=False)
         self.table.to_csv(out / "candidates.csv", index=False)
+        self.baseline.to_csv(out / "baseline.csv", index=False)
         self.comparison.to_csv(out / "comparison.csv")
         self.sd.to_csv(out / "sd.csv")
         if self.discrimination is not None:
             self.discrimination.to_csv(out / "discrimination.csv", index=False)
-        (out / "design.json").write_text(json.dumps(self.settings, indent=2, default=str))
+        doc = {**self.settings, "_result": {"model_id": self.model_id, "covariates": list(self.covariates),
+                                            "units": self.units, "plot": self.plot}}
+        (out / "design.json").write_text(json.dumps(doc, indent=2, default=str))
         plot_eig(self, out / "eig.png")
         return out
 
@@ -1053,6 +1057,22 @@ def plot_eig(result, path=None):
     return _finish(fig, path)
 
 
+def load_design(out):
+    """The :class:`DesignResult` that :meth:`DesignResult.write` wrote into folder ``out``."""
+    out = Path(out)
+    try:
+        doc = json.loads((out / "design.json").read_text())
+        meta = doc.pop("_result")
+        tables = {name: pd.read_csv(out / f"{name}.csv") for name in ("plan", "candidates", "baseline")}
+        comparison = pd.read_csv(out / "comparison.csv", index_col=0)
+        sd = pd.read_csv(out / "sd.csv", index_col=0)
+    except (OSError, KeyError, ValueError) as exc:
+        raise InputError(out, f"not a folder written by `skinfit design --out` ({type(exc).__name__}: {exc})") from None
+    disc = pd.read_csv(out / "discrimination.csv") if (out / "discrimination.csv").is_file() else None
+    return DesignResult(meta["model_id"], tuple(meta["covariates"]), meta["units"], tables["candidates"],
+                        tables["plan"], tables["baseline"], comparison, sd, doc, disc, meta.get("plot") or {})
+
+
 def design_section_html(result, figdir):
     """A self-contained HTML section (string) for a report: the EIG figure (written to
     ``figdir/design_<model>.png``), plan vs baseline, predicted sds and the plan."""
@@ -1103,23 +1123,3 @@ def cli_design(args):
         out = result.write(args.out)
         print(f"\nwritten: {out / 'plan.csv'} (user units), candidates.csv, comparison.csv, sd.csv, eig.png")
     return 0
-
-
-def add_parser(sub, lazy):
-    """The ``design`` subcommand's arguments (called by skinfit.cli.build_parser)."""
-    s = sub.add_parser("design", help="which measurements next: rank candidate conditions by expected "
-                                      "information gain and propose a plan")
-    s.add_argument("model", help="model id (models/<id>.toml)")
-    s.add_argument("--candidates", required=True, help="TOML grid or list of candidate conditions, user units")
-    s.add_argument("--n", type=int, default=24, help="measurements in the plan (default 24)")
-    s.add_argument("--from", dest="from_fit", help="a saved fit (fit.nc or run directory): start from its posterior")
-    s.add_argument("--params", help="target parameters, comma-separated (default all)")
-    s.add_argument("--discriminate", nargs="+", metavar="MODEL", help="competing models: plan to tell them apart")
-    s.add_argument("--baseline", help="dataset whose design is the baseline (default: the fit's or the model's)")
-    s.add_argument("--sigma", type=float, help="noise sd (default: the fit's posterior median or the prior median)")
-    s.add_argument("--outer", type=int, default=400, help="outer Monte Carlo draws (default 400)")
-    s.add_argument("--inner", type=int, default=400, help="inner Monte Carlo draws (default 400)")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--out", help="directory for plan.csv, candidates.csv, comparison.csv, sd.csv, eig.png")
-    s.set_defaults(func=lazy("skinfit.design", "cli_design"))
-    return s

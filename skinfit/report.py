@@ -366,7 +366,7 @@ def _write_png(fig, path):
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
-                 contrasts=None):
+                 contrasts=None, designs=()):
     """Write a self-contained static report of ``fits`` into ``out_dir``.
 
     Parameters
@@ -477,11 +477,19 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
             entry["figure"] = {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}
         comparisons.append(entry)
 
+    from markupsafe import Markup
+
+    from .design import design_section_html
+
+    # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
+    design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id,
+                        "html": Markup(design_section_html(d, figdir))} for d in designs]
     issues_all.sort(key=lambda i: i["status"] != "FAIL")  # failures first, then warnings (stable)
     n_fail = sum(i["status"] == "FAIL" for i in issues_all)
     context = {"title": title or "skinfit report", "version": __version__, "sections": sections,
                "issues": issues_all, "n_fail": n_fail, "n_warn": len(issues_all) - n_fail,
                "comparisons": comparisons, "across": across, "contrasts": contrast_tables,
+               "designs": design_sections,
                "n_fits": len(sections), "n_converged": sum(s["converged"] for s in sections),
                "matplotlib": _version("matplotlib"), "arviz": _version("arviz")}
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
@@ -679,7 +687,10 @@ def cli_report(args):
     from .groups import data_drift
     from .report_groups import group_analyses
 
-    runs = _collect_runs(args.runs)
+    from .design import load_design
+
+    designs = [load_design(p) for p in args.runs if (Path(p) / "design.json").is_file()]
+    runs = _collect_runs([p for p in args.runs if not (Path(p) / "design.json").is_file()])
     fits = [load_fit(p) for p in runs]
     for message in data_drift(list(zip(runs, fits))):  # never a stale result unannounced
         print(f"skinfit report: warning: {message}", file=sys.stderr)
@@ -687,7 +698,7 @@ def cli_report(args):
     comparison = _comparisons(items)
     populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr))
     index = write_report(dict(items), args.out, comparison=comparison, populations=populations,
-                         contrasts=contrasts)
+                         contrasts=contrasts, designs=designs)
     if getattr(args, "json", False):
         import json
 

@@ -215,3 +215,29 @@ def test_report_section_shows_plan_comparison_and_figure(tmp_path):
     assert (tmp_path / "figures" / "design_electroadhesion.png").stat().st_size > 1000
     assert 'src="figures/design_electroadhesion.png"' in html
     assert html.count("<table") == 3 and "Plan vs baseline" in html
+
+
+def test_skinfit_report_shows_a_design_folder_as_a_section(tmp_path, capsys):
+    """`skinfit design --out D` then `skinfit report RUN D --out R`: the design written to disk
+    comes back equal (load_design) and the report carries its section, figure and plan."""
+    import re
+
+    from skinfit.cli import main
+    from skinfit.design import load_design
+
+    cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
+                                                                                          "values": [0, 200]}}}
+    result = skinfit.design("electroadhesion", cands, n=3, rng=2, n_outer=40, n_inner=40, noise_scale=0.02)
+    back = load_design(result.write(tmp_path / "design"))
+    pd.testing.assert_frame_equal(back.plan, result.plan.reset_index(drop=True), check_dtype=False)
+    assert back.model_id == "electroadhesion" and back.settings["seed"] == 2
+    assert main(["fit", "electroadhesion_coulomb", "electroadhesion_synthetic", "--out", str(tmp_path / "run"),
+                 "--seed", "1", "--quiet"]) in (0, 3)
+    assert main(["report", str(tmp_path / "run"), str(tmp_path / "design"), "--out", str(tmp_path / "rep")]) == 0
+    page = (tmp_path / "rep" / "index.html").read_text()
+    assert 'href="#design-electroadhesion"' in page and "Design the next experiment: electroadhesion" in page
+    assert (tmp_path / "rep" / "figures" / "design_electroadhesion.png").stat().st_size > 1000
+    plan_rows = re.search(r"<h3>Plan \(user units\)</h3>(.*?)</table>", page, re.S).group(1).count("<tr")
+    assert plan_rows == 1 + len(result.plan)  # header + the plan's rows
+    with pytest.raises(skinfit.InputError, match="not a folder written by `skinfit design --out`"):
+        load_design(tmp_path / "run")
