@@ -328,7 +328,7 @@ def build_parser():
                                       "information gain and propose a plan")
     s.add_argument("model", help="model id (models/<id>.toml)")
     s.add_argument("--candidates", required=True, help="TOML grid or list of candidate conditions, user units")
-    s.add_argument("--n", type=_COUNT, default=24, help="measurements in the plan (default 24)")
+    s.add_argument("--n", type=int, default=24, help="measurements in the plan (default 24; checked by skinfit.design)")
     s.add_argument("--from", dest="from_fit", help="a saved fit (fit.nc or run directory): start from its posterior")
     s.add_argument("--params", help="target parameters, comma-separated (default all)")
     s.add_argument("--discriminate", nargs="+", metavar="MODEL", help="competing models: plan to tell them apart")
