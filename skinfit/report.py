@@ -246,7 +246,8 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None)
         written as ``comparison.csv`` (``comparison_<name>.csv`` for several).
     population : mapping parameter -> distribution, optional
         Population distributions drawn on the forest plots (see :func:`skinfit.plots.plot_forest`);
-        also keyed by model id first, or a DataFrame indexed by parameter.
+        also keyed by model id first, or a DataFrame indexed by parameter, or a
+        :class:`skinfit.population.PopulationResult` (a new subject's predictive draws).
 
     Returns
     -------
