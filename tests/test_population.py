@@ -133,6 +133,20 @@ def test_cli_writes_tree_tables_and_states_the_family(cli_result):
     assert draws.ndim == 1 and 0.3 < np.median(draws) < 0.7 and back.get("E_star") is None
 
 
+def test_campaign_index_is_read_with_labels_as_written(thirteen, tmp_path):
+    """A campaign's index.json (a list of rows with model, dataset, group, status, path)."""
+    run, fits, _ = thirteen
+    groups = json.loads((run / "index.json").read_text())["groups"][:3]
+    rows = [{"model": "electroadhesion_coulomb", "dataset": "population", "group": g["group"], "status": "done",
+             "path": str(run / g["path"])} for g in groups]
+    rows.append({"model": "electroadhesion_coulomb", "dataset": "population", "group": "subject=S99",
+                 "status": "failed", "path": str(run / "missing.nc")})
+    (tmp_path / "index.json").write_text(json.dumps(rows))
+    loaded = load_run(tmp_path)
+    assert list(loaded) == ["S01", "S02", "S03"]
+    assert loaded["S02"].attrs["dataset_sha256"] == fits["S02"].attrs["dataset_sha256"]
+
+
 def test_cli_rejects_a_bad_family(thirteen, capsys):
     run, _, _ = thirteen
     assert main(["population", str(run), "--params", "mu", "--family", "mu=gamma"]) == 2
