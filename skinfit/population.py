@@ -762,8 +762,8 @@ def cli_population(args):
     params = None
     if args.params:
         params = [p for item in args.params for p in item.split(",") if p]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", PopulationWarning)
+    with warnings.catch_warnings():  # the warnings are printed below, with the result
+        warnings.simplefilter("ignore", PopulationWarning)
         result = population(args.run, params, family=_parse_family(args.family), correlated=args.correlated,
                             method=args.method, rng=args.seed, model=args.model)
     out = Path(args.out) if args.out else Path(args.run) / "population"
@@ -791,5 +791,4 @@ def cli_population(args):
     print("\n".join(lines))
     print(f"\nwritten: {path}, {out / 'population_summary.csv'}, population_subjects.csv, population_effects.csv"
           f"  ({time.perf_counter() - t0:.1f} s)")
-    del caught
     return 0
