@@ -305,6 +305,18 @@ def build_parser():
     s.add_argument("--workers", type=_COUNT, default=None, help="local worker processes (default: cores)")
     s.add_argument("--json", action="store_true", help="print the index as JSON (progress goes to stderr)")
     s.set_defaults(func=_lazy("skinfit.campaign", "cli_campaign"))
+    s = sub.add_parser("population", help="population distribution over per-subject fits (a --by run or a campaign)")
+    s.add_argument("run", help="run directory of `skinfit fit --by` or a campaign out directory (index.json)")
+    s.add_argument("--params", action="append", metavar="NAME[,NAME]", help="population parameters (default: "
+                   "every model parameter; noise scales stay per subject)")
+    s.add_argument("--family", action="append", metavar="PARAM=FAMILY",
+                   help="normal, lognormal or student_t per parameter (default lognormal when positive)")
+    s.add_argument("--correlated", action="store_true", help="correlated (multivariate normal) population")
+    s.add_argument("--method", default="gibbs", choices=["gibbs", "reweight"], help="sampler (default gibbs)")
+    s.add_argument("--model", help="the model to use from a campaign with several")
+    s.add_argument("--seed", type=int, default=None)
+    s.add_argument("--out", help="output directory (default RUN/population)")
+    s.set_defaults(func=_lazy("skinfit.population", "cli_population"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")
     s.add_argument("--dataset", help="shipped dataset whose design is simulated on (default: the model's)")

@@ -380,7 +380,8 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         written as ``comparison.csv`` (``comparison_<name>.csv`` for several).
     population : mapping parameter -> distribution, optional
         Population distributions drawn on the forest plots (see :func:`skinfit.plots.plot_forest`);
-        also keyed by model id first, or a DataFrame indexed by parameter.
+        also keyed by model id first, or a DataFrame indexed by parameter, or a
+        :class:`skinfit.population.PopulationResult` (a new subject's predictive draws).
     populations : dict model id -> population result, optional
         Population results (:func:`skinfit.population.population`) of the fits of a model,
         shown with their hyper-parameters and shrunk beside separate estimates
@@ -567,11 +568,17 @@ def _across_fits(items, figdir, population, issues, populations, out_dir):
         pop_info = population_section(pop_result) if pop_result is not None else None
         if pop_info is not None:
             pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
+            if pop_info["effects"] is not None:
+                pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
             pop_tables = {"hyper": _table(pop_info["hyper"].reset_index().set_index("parameter"), "parameter"),
                           "csv": f"population_{safe}.csv",
                           "subjects": [{"parameter": k, "table": _table(v, "subject")}
                                        for k, v in pop_info["subjects"].items()],
                           "hyperpriors": {k: str(v) for k, v in pop_info["hyperpriors"].items()},
+                          "effects": None if pop_info["effects"] is None else
+                          _table(pop_info["effects"].set_index(pop_info["effects"].columns[0]),
+                                 pop_info["effects"].columns[0]),
+                          "warnings": pop_info["warnings"],
                           "sampler": {k: str(v) for k, v in pop_info["sampler"].items() if k != "tau"}}
         else:
             pop_tables = None

@@ -64,7 +64,17 @@ class PopulationView:
         return self.result.subject_summary()
 
     def hyperpriors(self):
-        return dict(getattr(self.result, "hyperpriors", {}) or {})
+        return {k: v for k, v in dict(getattr(self.result, "hyperpriors", {}) or {}).items() if not k.startswith("_")}
+
+    def effects(self):
+        """Conditions as effects (a slope with a condition against 0, split levels against the
+        first): probabilities and intervals; None when the result has no such questions."""
+        effects = getattr(self.result, "effects", None)
+        table = effects() if callable(effects) else None
+        return table if table is not None and len(table) else None
+
+    def warnings(self):
+        return list(getattr(self.result, "warnings", []) or [])
 
     def sampler(self):
         return dict(getattr(self.result, "sampler", {}) or {})
@@ -112,7 +122,8 @@ def population_section(result):
     """Tables of a population result: hyper-parameters, and shrunk beside separate estimates.
 
     Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
-    "sampler", "intervals": {parameter: the population distribution's median and 94% range}}.
+    "sampler", "effects": DataFrame or None, "warnings": [text], "intervals": {parameter: the
+    population distribution's median and 94% range}}.
     """
     view = result if isinstance(result, PopulationView) else PopulationView(result)
     hyper = view.hyper_table().set_index(["parameter", "quantity"])
@@ -122,7 +133,8 @@ def population_section(result):
         t = per[per["parameter"] == name].drop(columns="parameter").set_index("subject")
         subjects[name] = t
     return {"parameters": view.parameters, "hyper": hyper, "subjects": subjects,
-            "hyperpriors": view.hyperpriors(), "sampler": view.sampler(),
+            "hyperpriors": view.hyperpriors(), "sampler": view.sampler(), "effects": view.effects(),
+            "warnings": view.warnings(),
             "intervals": {p: view.population_interval(p) for p in view.parameters}}
 
 

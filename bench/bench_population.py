@@ -1,0 +1,188 @@
+"""Population step after the per-subject fits: cost, convergence, coverage.
+
+1. Sizes (contact_area model, 126 presses a subject as in datasets/contact_area_synthetic):
+   the 13 shipped subjects with 4 and 8 population parameters, and 13, 50, 100 subjects
+   simulated from a known population (below) with all 10 sampled parameters (the 8 model
+   parameters and the 2 noise scales).  Per size: wall and CPU seconds of
+   ``skinfit.population.population`` on saved fits (loading the fits included), sweeps,
+   worst R-hat and ESS over the hyper-parameters.  ``--reweight`` also times the importance
+   reweighting path on 13 x 4.
+2. Coverage: 20 simulated Coulomb populations of 13 subjects (tests/popsim.py, log-normal,
+   median 0.5, sd 0.05 in log) at 2 and 6 presses per normal-force level: coverage of the
+   shrunk and separate 50/90/95% intervals of the subjects' friction coefficients and their
+   mean squared error in log.
+
+    .venv/bin/python bench/bench_population.py [--work DIR] [--skip-sizes] [--skip-coverage] [--reweight]
+    -> bench/results/population.json (and the numbers for bench/results/population.md)
+"""
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from skinfit.groups import fit_by  # noqa: E402
+from skinfit.physics.contact_area import contact_area  # noqa: E402
+from skinfit.population import PopulationWarning, load_run, population  # noqa: E402
+
+# the simulated population of the 50/100-subject sizes: log-normal (median, sd of log) for the
+# positive parameters, normal (mean, sd) for the slopes with actuation force
+POP = {"alpha_a0": ("log", 35e-6, 0.3), "alpha_a1": ("lin", -0.01, 0.004), "m0": ("log", 0.65, 0.2),
+       "m1": ("lin", -0.004, 0.0012), "beta_z0": ("log", 3.8, 0.35), "beta_z1": ("lin", -0.012, 0.004),
+       "n_z0": ("log", 0.65, 0.25), "n_z1": ("lin", 0.014, 0.003)}
+FA = np.arange(0.0, 31.0, 5.0)
+FN = np.array([0.25, 0.5, 1.0, 1.5, 2.0, 3.0])
+
+
+def simulate_contact(folder, n, seed=20261125):
+    """A contact_area dataset of ``n`` subjects drawn from POP (3 repeats of 7 x 6 forces)."""
+    rng = np.random.default_rng(seed)
+    card = (ROOT / "datasets/contact_area_synthetic/dataset.toml").read_text()
+    head, _, _ = card.partition("[provenance.subjects]")
+    cols = card[card.index("[columns.subject]"):]
+    head = head.replace('id = "contact_area_synthetic"', f'id = "contact_area_pop{n}"')
+    fa, fn, _ = (a.ravel() for a in np.meshgrid(FA, FN, np.arange(3), indexing="ij"))
+    lines = ["subject,actuation_force,normal_force,contact_area,impedance"]
+    for i in range(n):
+        while True:
+            p = {k: (np.exp(np.log(a) + b * rng.standard_normal()) if kind == "log" else a + b * rng.standard_normal())
+                 for k, (kind, a, b) in POP.items()}
+            y, ok = contact_area({k: np.float64(v) for k, v in p.items()}, {"normal_force": fn, "actuation_force": fa}, {})
+            if np.all(ok):
+                break
+        area = y["contact_area"][0] * np.exp(rng.normal(0.0, 0.12, fn.size))
+        imp = y["impedance"][0] * np.exp(rng.normal(0.0, 0.10, fn.size))
+        lines += [f"P{i + 1:03d},{a:.0f},{b:.2f},{c * 1e6:.4f},{d:.5f}" for a, b, c, d in zip(fa, fn, area, imp)]
+    out = folder / f"contact_area_pop{n}"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "dataset.toml").write_text(head + "\n" + cols)
+    (out / "data.csv").write_text("\n".join(lines) + "\n")
+    return out
+
+
+def fitted(work, name, dataset):
+    run = work / name
+    if not (run / "index.json").exists():
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fit_by("contact_area", str(dataset), "subject", run, seed=1)
+        print(f"fits {name}: {time.perf_counter() - t0:.0f} s", flush=True)
+    return run
+
+
+def timed(run, params, **kw):
+    t0, c0 = time.perf_counter(), time.process_time()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", PopulationWarning)
+        r = population(load_run(run), params, rng=1, **kw)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    d = r.diagnostics()
+    return r, {"subjects": len(r.subjects), "parameters": len(r.parameters), "wall_s": round(wall, 1),
+               "cpu_s": round(cpu, 1), "sweeps": r.sampler.get("sweeps"), "converged": r.converged,
+               "rhat_max": round(float(d["r_hat"].max()), 4),
+               "ess_bulk_min": round(float(d["ess_bulk"].min())), "ess_tail_min": round(float(d["ess_tail"].min())),
+               "warnings": [str(w.message) for w in caught]}
+
+
+def sizes(work, reweight):
+    four = ["alpha_a0", "m0", "beta_z0", "n_z0"]
+    eight = four + ["alpha_a1", "m1", "beta_z1", "n_z1"]
+    ten = eight + ["sigma_contact_area", "sigma_impedance"]
+    shipped = fitted(work, "ca13", "contact_area_synthetic")
+    sim = simulate_contact(work, 100)
+    runs = {n: fitted(work, f"pop{n}", _subset(sim, work, n)) for n in (13, 50, 100)}
+    rows = []
+    for label, run, params in [("13 shipped x 4", shipped, four), ("13 shipped x 8", shipped, eight),
+                               ("13 sim x 10", runs[13], ten), ("50 sim x 10", runs[50], ten),
+                               ("100 sim x 10", runs[100], ten)]:
+        r, row = timed(run, params)
+        row["size"] = label
+        if label == "13 shipped x 8":
+            row["effects"] = r.effects().to_dict("records")
+        rows.append(row)
+        print(row, flush=True)
+    if reweight:
+        _, row = timed(shipped, four, method="reweight")
+        row["size"] = "13 shipped x 4, method=reweight"
+        rows.append(row)
+        print(row, flush=True)
+    return rows
+
+
+def _subset(sim, work, n):
+    if n == 100:
+        return sim
+    out = work / f"contact_area_pop{n}"
+    out.mkdir(exist_ok=True)
+    card = (sim / "dataset.toml").read_text().replace('id = "contact_area_pop100"', f'id = "contact_area_pop{n}"')
+    (out / "dataset.toml").write_text(card)
+    lines = (sim / "data.csv").read_text().splitlines()
+    keep = {f"P{i + 1:03d}" for i in range(n)}
+    (out / "data.csv").write_text("\n".join([lines[0]] + [x for x in lines[1:] if x.split(",")[0] in keep]) + "\n")
+    return out
+
+
+def coverage(n_pop=20, seed=7):
+    from popsim import draw_population, subject_fits
+
+    rng = np.random.default_rng(seed)
+    out = {}
+    for presses in (2, 6):
+        hits = {k: {50: 0, 90: 0, 95: 0} for k in ("shrunk", "separate")}
+        err = {"shrunk": [], "separate": []}
+        n = 0
+        t0 = time.process_time()
+        for _ in range(n_pop):
+            _, _, theta = draw_population(rng, "lognormal", 13, hyper=(np.log(0.5), 0.05))
+            fits = subject_fits(rng, theta, presses)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                r = population(fits, ["mu"], rng=rng)
+            for prob in (50, 90, 95):
+                t = r.subject_summary(prob=prob / 100)
+                for k in hits:
+                    hits[k][prob] += int(np.sum((t[f"{k}_lower"] < theta) & (theta < t[f"{k}_upper"])))
+            for k in err:
+                err[k] += list((np.log(t[k]) - np.log(theta)) ** 2)
+            n += 13
+        out[presses] = {"truths": n, "coverage": {k: {p: v / n for p, v in h.items()} for k, h in hits.items()},
+                        "mse_log": {k: float(np.mean(v)) for k, v in err.items()}, "cpu_s": round(time.process_time() - t0)}
+        print(presses, out[presses], flush=True)
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--work", default="/tmp/skinfit_bench_population")
+    ap.add_argument("--skip-sizes", action="store_true")
+    ap.add_argument("--skip-coverage", action="store_true")
+    ap.add_argument("--reweight", action="store_true")
+    ap.add_argument("--out", default=str(ROOT / "bench/results/population.json"))
+    args = ap.parse_args()
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    path = Path(args.out)
+    res = json.loads(path.read_text()) if path.exists() else {}
+    res["machine"] = f"{platform.node()} {platform.machine()}, {os.cpu_count()} cores"
+    res["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    res["load_average_at_start"] = os.getloadavg()
+    if not args.skip_sizes:
+        res["sizes"] = sizes(work, args.reweight)
+        path.write_text(json.dumps(res, indent=1, default=str))
+    if not args.skip_coverage:
+        res["coverage"] = coverage()
+        path.write_text(json.dumps(res, indent=1, default=str))
+
+
+if __name__ == "__main__":
+    main()
