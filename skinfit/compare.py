@@ -1,5 +1,13 @@
 """``skinfit.compare``: fits of the same data ranked by evidence, with Bayes factors and LOO."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    from collections.abc import Mapping, Sequence
+    from .fit import Fit
+
 import warnings
 from pathlib import Path
 
@@ -32,7 +40,8 @@ def loo(fit):
         return az_loo(combined, var_name="total")
 
 
-def compare(fits, *, method="bridge", rng=None):
+def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
+            rng: int | np.random.Generator | None = None) -> pd.DataFrame:
     """One table ranked by log evidence: log Z +- se, log Bayes factor against the best with its
     error and strength in words (Kass & Raftery 1995), and PSIS-LOO elpd +- se with the number of
     Pareto k > 0.7.  Refuses fits made on different data.

@@ -13,6 +13,14 @@ For each pair: the posterior of ``A - B`` and of ``A / B`` (mean and highest-den
 ArviZ), and ``P(A > B)`` (the fraction of paired draws with A > B).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    from collections.abc import Mapping
+    from .fit import Fit
+
 import itertools
 
 import numpy as np
@@ -64,7 +72,7 @@ def _table(named, prob):
     return pd.DataFrame(rows)
 
 
-def level_contrasts(fit, parameter, prob=0.95):
+def level_contrasts(fit: Fit, parameter: str, prob: float = 0.95) -> pd.DataFrame:
     """All pairwise contrasts between the levels of a split ``parameter`` within one fit.
 
     Paired draws (same chain and draw).  Returns a table with one row per pair (A, B).
@@ -76,7 +84,8 @@ def level_contrasts(fit, parameter, prob=0.95):
     return _table({s: draws(fit, s) for s in slots}, prob)
 
 
-def fit_contrasts(fits, parameter, rng=None, prob=0.95):
+def fit_contrasts(fits: Mapping[str, Fit], parameter: str, rng: int | np.random.Generator | None = None,
+                  prob: float = 0.95) -> pd.DataFrame:
     """All pairwise contrasts of ``parameter`` between separate fits (independent posteriors).
 
     Parameters

@@ -9,6 +9,14 @@ the model are errors.  Only regular files inside the card's folder (or named exp
 read, up to ``$SKINFIT_MAX_DATA_MB``.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    from collections.abc import Mapping
+    from .models import Model
+
 import csv
 import hashlib
 import io
@@ -93,7 +101,8 @@ class Dataset:
                        self.provenance, self.model, self.path, h.hexdigest())
 
     @classmethod
-    def from_frame(cls, frame, *, units=None, model=None, id="frame", title=""):
+    def from_frame(cls, frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
+                   model: str | Model | None = None, id: str = "frame", title: str = "") -> Dataset:
         """A Dataset from a pandas DataFrame: see :func:`skinfit.data.from_frame`."""
         return from_frame(frame, units=units, model=model, id=id, title=title)
 
@@ -179,7 +188,8 @@ def max_data_bytes():
                          f"{os.environ['SKINFIT_MAX_DATA_MB']!r})") from None
 
 
-def load_dataset(name, *, model=None, units=None, max_bytes=None):
+def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
+                 units: Mapping[str, str] | None = None, max_bytes: int | None = None) -> Dataset:
     """Load a dataset by id (``datasets/<id>/``), by the path of its folder or card, or from a
     CSV file whose header gives the units (``normal_force [mN], voltage [V], ...``).
 
@@ -326,7 +336,8 @@ def _load_csv(path, *, model=None, units=None, max_bytes=None):
     return ds
 
 
-def from_frame(frame, *, units=None, model=None, id="frame", title=""):
+def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
+               model: str | Model | None = None, id: str = "frame", title: str = "") -> Dataset:
     """A Dataset from a pandas DataFrame, validated as a CSV is: column names may carry their
     unit (``"normal_force [mN]"``) or ``units`` gives it (column -> unit); values converted to SI."""
     if not isinstance(frame, pd.DataFrame):
@@ -561,6 +572,6 @@ def _validate(table, columns, where):
     return pd.DataFrame(out)
 
 
-def list_datasets():
+def list_datasets() -> list[str]:
     return sorted(available("datasets"))
 

@@ -40,6 +40,16 @@ Parameters whose prediction leaves the model's physical support at a candidate a
 the draws (the support is part of the model; how many is reported).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    import os
+    from collections.abc import Mapping, Sequence
+    from .fit import Fit
+    from .models import Model
+
 import json
 import math
 import tomllib
@@ -780,8 +790,10 @@ def _baseline_design(model, fit, baseline, n, units):
     return {k: np.asarray(v, float)[idx] for k, v in x.items()}, f"{label}: {len(idx)} of {rows} rows, evenly spaced"
 
 
-def design(fit_or_model, candidates, n=24, params=None, rng=None, *, discriminate=(), baseline=None,
-           noise_scale=None, n_outer=400, n_inner=400, n_batch=200, n_draws=4000):
+def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapping, n: int = 24,
+           params: Sequence[str] | None = None, rng: int | np.random.Generator | None = None, *,
+           discriminate: Sequence[str | Model] = (), baseline: str | None = None, noise_scale: float | None = None,
+           n_outer: int = 400, n_inner: int = 400, n_batch: int = 200, n_draws: int = 4000) -> DesignResult:
     """Which ``n`` measurements to make next, from the candidates, to learn most about ``params``.
 
     Parameters

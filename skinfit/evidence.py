@@ -7,6 +7,13 @@ coordinate map), so numbers from different models on the same data are comparabl
 Results are cached in the fit's attributes (``attrs["evidence"]``) and saved with it.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    from .fit import Fit
+
 import json
 import time
 
@@ -34,7 +41,8 @@ def posterior_draws(fit):
     return np.column_stack(cols)
 
 
-def evidence(fit, method="bridge", *, rng=None, n_repeats=1, refresh=False, **options):
+def evidence(fit: Fit, method: str = "bridge", *, rng: int | np.random.Generator | None = None,
+             n_repeats: int = 1, refresh: bool = False, **options) -> LogEvidence:
     """log Z of ``fit`` by ``method`` ("bridge" default, "laplace", "nested").
 
     Returns a :class:`~skinfit.evidence_methods.LogEvidence` (``log_z``, ``se``, ...).

@@ -8,6 +8,13 @@ pointwise ``log_likelihood`` and ``posterior_predictive`` groups, (draws x rows)
 of the tree's cost, are computed on first use (:attr:`Fit.idata`, :meth:`Fit.save`).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    from collections.abc import Mapping, Sequence
+
 import errno
 import json
 import math
@@ -58,10 +65,14 @@ def as_generator(rng):
     raise TypeError(f"rng must be an int seed, None or numpy.random.Generator (got {type(rng).__name__})")
 
 
-def fit(model, dataset, priors=None, *, units=None, rng=None, split=None, noise=None, constants=None,
-        nwalkers=None, ess_target=400, max_steps=20000, progress=False, strict=False,
-        n_global=2000, n_local=4, n_prior_draws=2000, checkpoint=None, resume=False,
-        checkpoint_every=30.0):
+def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
+        priors: str | os.PathLike | PriorSet | None = None, *, units: Mapping[str, str] | None = None,
+        rng: int | np.random.Generator | None = None, split: Mapping[str, Sequence[str]] | None = None,
+        noise: str | Mapping[str, str] | None = None, constants: Mapping[str, float] | None = None,
+        nwalkers: int | None = None, ess_target: float = 400, max_steps: int = 20000, progress: bool = False,
+        strict: bool = False, n_global: int = 2000, n_local: int = 4, n_prior_draws: int = 2000,
+        checkpoint: str | os.PathLike | None = None, resume: bool = False,
+        checkpoint_every: float = 30.0) -> Fit:
     """Fit ``model`` to ``dataset``: MAP by nlopt, then emcee until converged.
 
     Parameters
@@ -494,7 +505,7 @@ class Fit:
         """The complete ArviZ DataTree (computes the deferred groups on first access)."""
         return self.complete()._tree
 
-    def complete(self):
+    def complete(self) -> Fit:
         """Compute the deferred groups, if pending, and put them in the tree in ArviZ's order
         (:data:`GROUPS`), with their time as ``pointwise_s`` in ``attr("timings")``; returns
         the fit.  The root attributes are kept (e.g. an evidence already cached)."""
@@ -585,7 +596,7 @@ class Fit:
         return self._posterior
 
     # ---- tables -------------------------------------------------------------------------
-    def summary(self):
+    def summary(self) -> pd.DataFrame:
         """Per parameter: its SI unit, mean, sd, 3%/97% HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
 
         ``contraction`` is 1 - var_posterior / var_prior, in the sampling coordinate (log for
@@ -678,7 +689,7 @@ class Fit:
             lines.append(self.summary().to_string())
         return "\n".join(lines)
 
-    def save(self, path):
+    def save(self, path: str | os.PathLike) -> Path:
         """Write the fit as NetCDF, atomically (temporary file + rename), with every group (a
         pending fit is completed first)."""
         path = Path(path)
@@ -736,7 +747,7 @@ class Fit:
         return f"Fit({self.model_id!r} on {self.dataset_id!r}, converged={self.converged})"
 
 
-def load_fit(path):
+def load_fit(path: str | os.PathLike) -> Fit:
     """Load a fit saved by :meth:`Fit.save`."""
     path = Path(path)
     if path.is_dir():

@@ -14,6 +14,13 @@ Seeds: every group's seed is derived from the one base seed and the group's labe
 the order in which the groups are fitted.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    from .fit import Fit
+
 import hashlib
 import json
 import os
@@ -185,7 +192,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     return pd.DataFrame(rows)
 
 
-def load_groups(path):
+def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
     """The fits of a :func:`fit_by` run directory (its ``index.json``): ``{label: Fit}``.
 
     Each fit must hold the group it is listed under and the data the index records (its

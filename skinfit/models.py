@@ -6,6 +6,16 @@ A card names its forward function (and ``[sampling]`` / ``[derived]`` functions)
 card are SI (:func:`skinfit.units.check_model_unit`).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    import os
+    from collections.abc import Mapping
+    import pandas as pd
+    from numpy.typing import ArrayLike
+
 import math
 import re
 import warnings
@@ -115,7 +125,8 @@ class Model:
                              f"declares {sorted(self.derived['quantities'])}", field="derived.quantities")
         return out
 
-    def predict(self, params, data, *, constants=None, return_valid=False):
+    def predict(self, params: Mapping[str, ArrayLike], data: pd.DataFrame | Mapping[str, ArrayLike], *,
+                constants: Mapping[str, float] | None = None, return_valid: bool = False):
         """Predicted observable(s) at the covariates of ``data``.
 
         Parameters
@@ -205,7 +216,7 @@ def _quantities(doc, key, where, *, observable=False):
 _CACHE = {}
 
 
-def load_model(name):
+def load_model(name: str | os.PathLike) -> Model:
     """Load a model card by id (``models/<id>.toml``) or by path.
 
     >>> load_model("electroadhesion").parameter_names[:3]
@@ -348,6 +359,6 @@ def _display(path):
     return display(path)
 
 
-def list_models():
+def list_models() -> list[str]:
     return sorted(available("models"))
 

@@ -31,6 +31,14 @@ area exponent? P(population mean < 0) and its interval) and :meth:`PopulationRes
 (two levels of a split parameter, ``"alpha[200]"`` vs ``"alpha[0]"``).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    import os
+    from collections.abc import Mapping, Sequence
+
 import json
 import math
 import warnings
@@ -492,9 +500,11 @@ def population_tables(result, prob=0.95):
 
 
 # ---- the entry point ----------------------------------------------------------------------
-def population(fits, parameters=None, *, family=None, correlated=False, method="gibbs", rng=None,
-               model=None, chains=8, ess_target=400, rhat_max=1.01, max_sweeps=20000, burn=300, min_contraction=0.5,
-               n_draws=1000, max_steps=20000):
+def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, parameters: Sequence[str] | None = None,
+               *, family: str | Mapping[str, str] | None = None, correlated: bool = False, method: str = "gibbs",
+               rng: int | np.random.Generator | None = None, model: str | None = None, chains: int = 8,
+               ess_target: float = 400, rhat_max: float = 1.01, max_sweeps: int = 20000, burn: int = 300,
+               min_contraction: float = 0.5, n_draws: int = 1000, max_steps: int = 20000) -> PopulationResult:
     """Infer the population distribution of ``parameters`` from separate per-subject fits.
 
     Parameters

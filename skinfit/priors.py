@@ -5,6 +5,13 @@ parameter's physical ``bounds`` and renormalised there, so every prior is proper
 log-density is normalised (evidence from different models is comparable).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    import os
+
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -216,7 +223,7 @@ def check_priors_for(priors, model):
                          f"{model.id!r} (copy it and set model = {model.id!r} if it applies)", field="model")
 
 
-def load_priors(name):
+def load_priors(name: str | os.PathLike) -> PriorSet:
     """Load a prior file by id (``priors/<id>.toml``) or by path."""
     path = find_file("priors", name)
     doc, text = read_toml(path)
@@ -236,5 +243,5 @@ def load_priors(name):
                     path=where, sha256=sha256_file(path), text=text)
 
 
-def list_priors():
+def list_priors() -> list[str]:
     return sorted(available("priors"))
