@@ -51,8 +51,10 @@ def read_regular(path, max_bytes, what="file", where=None):
     return raw
 
 
-def read_toml(path):
-    """Parse a TOML file; syntax errors become an InputError naming the file and line."""
+def read_toml(path, *, versioned=True):
+    """Parse a TOML file; syntax errors become an InputError naming the file and line.  A card
+    (``versioned``) must declare ``schema_version = 1``; a plain input file (a design's
+    candidates) need not."""
     path = Path(path)
     raw = read_regular(path, MAX_TOML_BYTES)
     try:
@@ -71,7 +73,7 @@ def read_toml(path):
     except RecursionError:  # nesting the bracket count above did not see (e.g. inside odd quoting)
         raise InputError(path, "arrays or tables nested too deeply to read") from None
     version = doc.get("schema_version")
-    if version != 1:
+    if versioned and version != 1:
         raise InputError(path, f"expected schema_version = 1 (got {version!r})", field="schema_version")
     return doc, text
 

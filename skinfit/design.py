@@ -52,7 +52,6 @@ if TYPE_CHECKING:  # names used only in annotations
 
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -529,10 +528,9 @@ def read_candidates(source, model):
         path = Path(source)
         if not path.exists():
             raise InputError(path, "no such candidates file")
-        try:
-            doc = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(path, f"not valid TOML ({exc})") from None
+        from ._toml import read_toml  # regular files only, bounded size and nesting, errors with the line
+
+        doc, _ = read_toml(path, versioned=False)
     cards = {c.name: c for c in model.covariates}
     columns, units = {}, {}
     if "grid" in doc and "points" in doc:

@@ -241,3 +241,21 @@ def test_skinfit_report_shows_a_design_folder_as_a_section(tmp_path, capsys):
     assert plan_rows == 1 + len(result.plan)  # header + the plan's rows
     with pytest.raises(skinfit.InputError, match="not a folder written by `skinfit design --out`"):
         load_design(tmp_path / "run")
+
+
+def test_candidates_file_read_as_a_card_is(tmp_path):
+    """A candidates file goes through the card reader: a FIFO is refused before reading (it would
+    wait for ever), bad TOML names the file and its line."""
+    import os
+
+    from skinfit.design import read_candidates
+
+    model = skinfit.load_model("electroadhesion")
+    fifo = tmp_path / "grid.toml"
+    os.mkfifo(fifo)
+    with pytest.raises(InputError, match="FIFO"):
+        read_candidates(str(fifo), model)
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[grid.normal_force\nunit = 'N'\n")
+    with pytest.raises(InputError, match="bad.toml"):
+        read_candidates(str(bad), model)
