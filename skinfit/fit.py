@@ -698,7 +698,7 @@ class Fit:
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
         # is an OSError with the previous file in place
         tree = self.idata
-        if "dask" in sys.modules:  # in a Dask worker xarray would take a distributed lock named by the target
+        if sys.modules.get("dask") is not None:  # in a Dask worker xarray would take a distributed lock named by the target
             import dask
 
             with dask.config.set(scheduler="synchronous"):
