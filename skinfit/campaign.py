@@ -76,7 +76,7 @@ import numpy as np
 import pandas as pd
 
 from ._toml import find_file, read_toml, require
-from .checkpoint import CheckpointLock, remove_stale_temps, temp_file
+from .checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from .data import load_dataset
 from .errors import ConvergenceWarning, InputError
 from .fit import fit
@@ -451,13 +451,7 @@ def _watch_parent(pid, interval=0.5):
 
 
 def _write_text(path, text):
-    tmp = temp_file(path)
-    try:
-        Path(tmp).write_text(text)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    replace_atomic(path, text.encode())
 
 
 def _write_index(out, rows):

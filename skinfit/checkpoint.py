@@ -44,7 +44,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["FORMAT", "run_identity", "Checkpoint", "Saved", "load_checkpoint", "CheckpointLock",
-           "map_record", "map_from_record", "temp_file", "remove_stale_temps"]
+           "map_record", "map_from_record", "temp_file", "remove_stale_temps", "replace_atomic"]
 
 #: Version of the checkpoint layout and of the sampler that wrote it; a checkpoint of another
 #: version is refused (2: adaptive independence proposal, whose chain a format-1 run cannot continue).
@@ -299,11 +299,20 @@ def write_atomic(path, build):
     image = io.BytesIO()  # HDF5 builds in memory: on a full disk its own writes crashed the process (rc 139)
     with h5py.File(image, "w") as f:
         build(f)
+    replace_atomic(path, image.getbuffer())
+
+
+def replace_atomic(path, data):
+    """Put the bytes ``data`` at ``path``, all or nothing: written to a :func:`temp_file` beside
+    it, flushed to disk, renamed over ``path`` (atomic on POSIX), the directory entry flushed.
+    A full or read-only disk is an OSError naming ``path``, the previous file (or none) kept."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_file(path)
     try:
-        try:  # a full disk: OSError naming the file, the previous file kept
+        try:
             with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_TRUNC), "wb") as f:
-                f.write(image.getbuffer())
+                f.write(data)
                 f.flush()
                 os.fsync(f.fileno())
         except OSError as exc:

@@ -709,21 +709,9 @@ class Fit:
         if free < data.nbytes + (1 << 20):
             raise OSError(errno.ENOSPC, f"no space to save the fit: {data.nbytes / 2**20:.1f} MiB needed, "
                                         f"{free / 2**20:.1f} MiB free", str(path))
-        from .checkpoint import temp_file
+        from .checkpoint import replace_atomic
 
-        tmp = temp_file(path)  # unique per writer; a killed writer's is removed by the next run
-        try:
-            try:
-                with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_TRUNC), "wb") as f:
-                    f.write(data)
-                    f.flush()
-                    os.fsync(f.fileno())
-            except OSError as exc:  # e.g. the disk filled meanwhile: name the file
-                raise OSError(exc.errno, f"cannot write: {exc.strerror}", str(path)) from None
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        replace_atomic(path, data)  # a unique temp file per writer; a killed writer's is removed by the next run
         return path
 
     def _repr_html_(self) -> str:
@@ -747,13 +735,19 @@ class Fit:
         return f"Fit({self.model_id!r} on {self.dataset_id!r}, converged={self.converged})"
 
 
-def load_fit(path: str | os.PathLike) -> Fit:
-    """Load a fit saved by :meth:`Fit.save`."""
+def fit_file(path) -> Path:
+    """The file of a saved fit: ``path`` itself, or ``path/fit.nc`` for a run directory."""
     path = Path(path)
     if path.is_dir():
         path = path / "fit.nc"
     if not path.exists():
         raise InputError(path, "no such fit file")
+    return path
+
+
+def load_fit(path: str | os.PathLike) -> Fit:
+    """Load a fit saved by :meth:`Fit.save`."""
+    path = fit_file(path)
     try:
         tree = xr.open_datatree(path)  # = arviz.from_netcdf, without importing arviz-plots
     except (OSError, ValueError) as exc:

@@ -268,16 +268,6 @@ def data_drift(fits):
 
 def _write_json(path, doc):
     """Write JSON atomically (temporary file + rename)."""
-    from .checkpoint import temp_file
+    from .checkpoint import replace_atomic
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = temp_file(path)
-    try:
-        with open(tmp, "w") as fh:
-            json.dump(doc, fh, indent=1, default=str)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    replace_atomic(path, json.dumps(doc, indent=1, default=str).encode())

@@ -113,11 +113,9 @@ def _load_light(path):
     import h5netcdf
     import xarray as xr
 
-    path = Path(path)
-    if path.is_dir():
-        path = path / "fit.nc"
-    if not path.exists():
-        raise InputError(path, "no such fit file")
+    from .fit import fit_file
+
+    path = fit_file(path)
     try:
         with h5netcdf.File(path, "r") as h:
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}

@@ -184,18 +184,13 @@ def test_result_files_follow_the_umask(tmp_path, seeded_run):
     as summary.csv beside it does."""
     out, _, _ = seeded_run
     fit = skinfit.load_fit(out / "fit.nc")
-    old = os.umask(0o027)
-    try:
-        path = fit.save(tmp_path / "u" / "fit.nc")
-    finally:
-        os.umask(old)
-    assert stat.S_IMODE(path.stat().st_mode) == 0o640
-    old = os.umask(0o022)
-    try:
-        path = fit.save(tmp_path / "v" / "fit.nc")
-    finally:
-        os.umask(old)
-    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    for mask, mode in ((0o027, 0o640), (0o022, 0o644)):
+        old = os.umask(mask)
+        try:
+            path = fit.save(tmp_path / oct(mask) / "fit.nc")
+        finally:
+            os.umask(old)
+        assert stat.S_IMODE(path.stat().st_mode) == mode
 
 
 def test_compare_leaves_its_inputs_byte_identical_unless_asked(tmp_path, seeded_run, capsys):
