@@ -2,9 +2,11 @@
 
 A unit is a string such as ``mN``, ``um`` / ``µm``, ``mm^2``, ``mm/s``, ``kPa``, ``N*s/m``.
 Coherent SI units (``N``, ``m^2/J``, ``N*s/m``: a product of SI symbols with integer powers,
-factor 1) are read by a small grammar here; anything else (prefixes, ``deg``, ``min``,
-``inch``...) by pint, imported on first need (its import and registry cost ~0.3-1 s) through
-one application-level UnitRegistry.  Model cards state SI units and may also write a power
+factor 1) are read by a small grammar here, and so are such products with one SI prefix
+(``mN``, ``mm^2``, ``mm/s``, ``kPa``: the factor computed as pint computes it, bit for bit,
+which tests/test_units.py checks against pint); anything else (``deg``, ``min``, ``inch``,
+two prefixes...) by pint, imported on first need (its import and registry cost ~1 s)
+through one application-level UnitRegistry.  Model cards state SI units and may also write a power
 as a symbol of the model (``N^n_z``, ``N^(1-c)``): :func:`check_model_unit`.
 """
 
@@ -40,7 +42,13 @@ NONNEGATIVE = {"force", "length", "area", "pressure", "frequency", "voltage", "i
 UNITS = ("1", "N", "mN", "uN", "V", "kV", "m", "mm", "um", "µm", "nm", "m^2", "mm^2", "Pa", "kPa", "MPa",
          "m/s", "mm/s", "Hz", "kHz", "rad", "deg", "s", "ms", "N*s/m")
 
-_TOKEN = re.compile(r"\s*(?:(?P<sym>[A-Za-z]+|1|-)(?:\^(?P<pow>-?\d+|\(-?\d+\)))?)\s*")
+#: SI prefixes the grammar reads (``u``, ``µ`` and ``μ``: micro), longest first; each checked
+#: against pint on every symbol of :data:`_SI` it may precede (tests/test_units.py)
+_PREFIXES = {"da": 1e1, "T": 1e12, "G": 1e9, "M": 1e6, "k": 1e3, "h": 1e2, "d": 1e-1, "c": 1e-2, "m": 1e-3,
+             "u": 1e-6, "µ": 1e-6, "μ": 1e-6, "n": 1e-9, "p": 1e-12, "f": 1e-15}
+_PREFIXABLE = set(_SI) - {"kg", "1", "-"}
+
+_TOKEN = re.compile(r"\s*(?:(?P<sym>[A-Za-zµμ]+|1|-)(?:\^(?P<pow>-?\d+|\(-?\d+\)))?)\s*")
 
 
 @dataclass(frozen=True)
@@ -62,13 +70,36 @@ def _dims_text(dims):
 
 def _coherent(text):
     """Dimension exponents of a product of SI symbols (``N*s/m``, ``m^2/N^2``), or None."""
-    dims, sign, pos = {}, 1, 0
+    product = _product(text)
+    return None if product is None else product[1]
+
+
+def _split_prefix(sym):
+    """(prefix, SI symbol) of a symbol with one SI prefix (``mN`` -> ``m``, ``N``), or None."""
+    for prefix in _PREFIXES:
+        if sym.startswith(prefix) and sym[len(prefix):] in _PREFIXABLE:
+            return prefix, sym[len(prefix):]
+    return None
+
+
+def _product(text, prefixed=False):
+    """(factor to SI, dimension exponents) of a product of SI symbols with integer powers, or
+    None; with ``prefixed``, one of the symbols may carry an SI prefix (``mN*s/m``, ``mm^2``),
+    its factor ``prefix ** power`` as pint computes it (a second prefix: None, for pint, whose
+    products of several factors round differently)."""
+    dims, sign, pos, factor = {}, 1, 0, None
     while pos < len(text):
         m = _TOKEN.match(text, pos)
-        if not m or m.end() == pos or m.group("sym") not in _SI:
+        if not m or m.end() == pos:
             return None
+        sym = m.group("sym")
         power = int(m.group("pow").strip("()")) if m.group("pow") else 1
-        for k, v in _SI[m.group("sym")].items():
+        if sym not in _SI:
+            split = _split_prefix(sym) if prefixed and factor is None else None
+            if split is None:
+                return None
+            factor, sym = _PREFIXES[split[0]] ** (sign * power), split[1]
+        for k, v in _SI[sym].items():
             dims[k] = dims.get(k, 0) + sign * power * v
         pos = m.end()
         if pos < len(text):
@@ -78,7 +109,7 @@ def _coherent(text):
             pos += 1
             if pos == len(text):
                 return None
-    return frozenset((k, v) for k, v in dims.items() if v != 0)
+    return (1.0 if factor is None else factor), frozenset((k, v) for k, v in dims.items() if v != 0)
 
 
 _REGISTRY = None
@@ -100,9 +131,9 @@ def parse_unit(text):
     if not isinstance(text, str) or not text.strip():
         raise ValueError(f"unknown unit {text!r}: expected a unit such as N, mN, um, mm^2, mm/s, kPa")
     text = text.strip()
-    dims = _coherent(text)
-    if dims is not None:
-        return Unit(text, 1.0, dims)
+    product = _product(text, prefixed=True)
+    if product is not None:
+        return Unit(text, *product)
     ureg = registry()
     try:
         q = ureg.Quantity(1.0, ureg.parse_units(text.replace("μ", "µ")))
@@ -113,6 +144,8 @@ def parse_unit(text):
     factor = float(base.magnitude)
     if not math.isfinite(factor) or factor <= 0 or not getattr(q, "_is_multiplicative", True):
         raise ValueError(f"unit {text!r} is not a multiple of an SI unit (an offset scale such as degC?)")
+    if any(v != int(v) for v in base.dimensionality.values()):
+        raise ValueError(f"unit {text!r} is not a whole power of SI base units ({base.units})")
     dims = frozenset((str(k), int(v)) for k, v in base.dimensionality.items() if v != 0)
     return Unit(text, factor, dims)
 
