@@ -198,7 +198,8 @@ def _cmd_fit(args):
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
     path = result.save(out / "fit.nc")
-    (out / "summary.csv").write_text(result.summary().to_csv())
+    summary = result.summary()
+    (out / "summary.csv").write_text(summary.to_csv())
     card = None
     if dataset is not None:  # a CSV without a card: its card and a copy beside the result
         from .data import write_card
@@ -209,10 +210,10 @@ def _cmd_fit(args):
                           "dataset": result.dataset_id, "dataset_card": None if card is None else str(card),
                           "seed": int(result.attrs["seed"]),
                           "converged": bool(result.converged), "warnings": result.warnings,
-                          "summary": json.loads(result.summary().to_json(orient="index")),
+                          "summary": json.loads(summary.to_json(orient="index")),
                           "seconds": time.perf_counter() - t0}, indent=2, default=str))
     else:
-        print(result.report_text())
+        print(result.report_text(summary))
         if card is not None:
             print(f"dataset card (rerun with it: skinfit fit {args.model} {out / 'dataset'}): {card}")
         print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")

@@ -23,6 +23,7 @@ import shutil
 import sys
 import time
 import warnings
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
@@ -31,6 +32,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
+# ArviZ's tree builder, imported here rather than where the tree is built: importing arviz_base
+# walks the call stack (lazy_loader's look-up of numpyro), which took 0.4 s from deep inside a
+# fit against 0.06 s here, before scipy.stats multiplies the modules it scans
+from arviz_base import from_dict
 
 from .data import Dataset, as_dataset
 from .labels import annotate
@@ -290,8 +295,6 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
-    from arviz_base import from_dict
-
     tree = from_dict({"posterior": posterior, "prior": prior_group, "sample_stats": sample_stats,
                       "observed_data": observed, "constant_data": constant,
                       **_derived_group(post, theta, nw, nd, dims, coords, attrs)},
@@ -317,8 +320,6 @@ class _Deferred:
     def groups(self, post, every=1, walker_step=1):
         """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id); with
         ``every`` or ``walker_step`` > 1 on those draws only (``chain`` / ``draw`` coordinates kept)."""
-        from arviz_base import from_dict
-
         ll, simulated = post.replicate(self.draws(every, walker_step), np.random.default_rng(self.seed))
         chains, kept = np.arange(self.nwalkers)[::walker_step], np.arange(self.ndraws)[::every]
         shape = (len(chains), len(kept), post.n)
@@ -657,8 +658,9 @@ class Fit:
                 "timings": self.attr("timings"), "support_counts": self.attr("support_counts"),
                 "support_condition": self.attrs.get("support_condition", "")}
 
-    def report_text(self):
-        """The text printed by ``skinfit fit``: summary table and diagnostics."""
+    def report_text(self, summary: pd.DataFrame | None = None) -> str:
+        """The text printed by ``skinfit fit``: summary table and diagnostics (``summary``:
+        the table of :meth:`summary` if the caller has it already)."""
         s = self.attr("sampler")
         t = self.attr("timings")
         c = self.attr("support_counts")
@@ -686,7 +688,7 @@ class Fit:
                  ""]
         with pd.option_context("display.width", 200, "display.max_columns", 20,
                                "display.float_format", "{:.4g}".format):
-            lines.append(self.summary().to_string())
+            lines.append((self.summary() if summary is None else summary).to_string())
         return "\n".join(lines)
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -698,12 +700,9 @@ class Fit:
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
         # is an OSError with the previous file in place
         tree = self.idata
-        if sys.modules.get("dask") is not None:  # in a Dask worker xarray would take a distributed lock named by the target
-            import dask
-
-            with dask.config.set(scheduler="synchronous"):
-                data = tree.to_netcdf(engine="h5netcdf")
-        else:
+        dask = sys.modules.get("dask")  # in a Dask worker xarray would take a distributed lock named by the target
+        with (dask.config.set(scheduler="synchronous") if dask is not None else nullcontext()), \
+                _distributed_unimported():
             data = tree.to_netcdf(engine="h5netcdf")
         free = shutil.disk_usage(path.parent).free
         if free < data.nbytes + (1 << 20):
@@ -733,6 +732,24 @@ class Fit:
 
     def __repr__(self):
         return f"Fit({self.model_id!r} on {self.dataset_id!r}, converged={self.converged})"
+
+
+@contextmanager
+def _distributed_unimported():
+    """While a process that has not imported Dask's ``distributed`` writes a fit: that package
+    unimportable (as without the ``dask`` extra).  xarray's netCDF writer imports it (0.4-0.8 s)
+    only to ask whether the active Dask scheduler is a distributed Client, and none can be in
+    a process that has not imported it; the file written is the same.  Another thread that
+    imports ``distributed`` meanwhile gets an ImportError."""
+    if "distributed" in sys.modules:  # imported (a Dask worker, a Client), or made unimportable by someone else
+        yield
+        return
+    sys.modules["distributed"] = None
+    try:
+        yield
+    finally:
+        if "distributed" in sys.modules and sys.modules["distributed"] is None:
+            del sys.modules["distributed"]
 
 
 def fit_file(path) -> Path:
