@@ -1,17 +1,20 @@
-"""Whole-process wall times of skinfit's commands beside a bare ``python -c pass``.
+"""Whole-process wall and CPU times of skinfit's commands beside a bare ``python -c pass``.
 
 Each command runs ``--repeats`` times as a fresh process, the commands interleaved (so a
 burst of load from other jobs hits all of them alike); the table gives the median and the
-minimum, and the largest cumulative imports of each (``python -X importtime``).
+minimum wall time, the median CPU time (user + sys, steadier than wall time on a shared
+machine), and the largest cumulative imports of each (``python -X importtime``).
 
     .venv/bin/python bench/bench_startup.py [--repeats 7] [--out bench/results/startup.md]
 
-``--without dask`` rows run the same command with ``dask`` made unimportable, as on an
-installation without the ``dask`` extra: xarray's netCDF writer imports ``dask.distributed``
-(~0.5-0.8 s) to look for a distributed scheduler whenever dask is installed.
+``without dask installed`` runs the same fit with ``dask`` made unimportable, as on an
+installation without the ``dask`` extra (xarray imports ``dask.array`` whenever it builds an
+array and dask is installed).  ``libraries only`` imports the third-party packages a fit
+imports, and nothing of skinfit: the floor under ``skinfit fit`` with these dependencies.
 """
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -25,6 +28,10 @@ from common import machine_info, machine_text  # noqa: E402
 
 PY = sys.executable
 NO_DASK = "import sys; sys.modules['dask'] = None; "
+#: the third-party packages ``skinfit fit`` imports (emcee and arviz_stats import scipy.stats,
+#: xarray imports pint and dask.array when they are installed)
+LIBRARIES = ("numpy", "pandas", "xarray", "scipy.stats", "emcee", "nlopt", "h5py", "h5netcdf", "arviz_base",
+             "arviz_stats", "pint", "dask.array")
 
 
 def commands(tmp):
@@ -38,6 +45,7 @@ def commands(tmp):
         ("skinfit fit electroadhesion electroadhesion_synthetic --out X (summary and saved file)",
          [PY, "-m", "skinfit", *fit], "< 2 s"),
         ("the same fit, without dask installed", [PY, "-c", "import sys; " + NO_DASK + cli.format(fit)], "< 2 s"),
+        ("libraries only: import " + ", ".join(LIBRARIES), [PY, "-c", "import " + ", ".join(LIBRARIES)], None),
     ]
 
 
@@ -55,33 +63,50 @@ def importtime(cmd, top=6):
     return sorted(rows, reverse=True)[:top]
 
 
+def run(cmd):
+    """(wall s, CPU s = user + sys) of one run of ``cmd`` as a child process."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise RuntimeError(f"{cmd} failed: {proc.stderr.read().decode()[-2000:]}")
+    proc.stderr.close()
+    return wall, usage.ru_utime + usage.ru_stime
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "startup.md"))
     args = ap.parse_args()
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         cmds = commands(tmp)
         subprocess.run(cmds[3][1], capture_output=True, check=True)  # compile .pyc files, warm the disk cache
         times = {name: [] for name, _, _ in cmds}
+        cpu = {name: [] for name, _, _ in cmds}
         for _ in range(args.repeats):
             for name, cmd, _ in cmds:
-                t0 = time.perf_counter()
-                subprocess.run(cmd, capture_output=True, check=True)
-                times[name].append(time.perf_counter() - t0)
+                wall, used = run(cmd)
+                times[name].append(wall)
+                cpu[name].append(used)
         imports = {name: importtime(cmd) for name, cmd, _ in cmds[1:4]}
     bare = statistics.median(times["python -c pass"])
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = ["# Start-up: whole-process wall times of skinfit's commands", "",
              f"`.venv/bin/python bench/bench_startup.py --repeats {args.repeats}` - {stamp}", "",
              machine_text(machine_info()), "",
+             f"Load average (1, 5, 15 min) at the start: {', '.join(f'{v:.2f}' for v in load_before)}.", "",
              f"Each command run {args.repeats} times as a new process, the commands interleaved; median and "
-             "minimum wall time, and the median less the bare interpreter's.", "",
-             "| command | median s | min s | median - python -c pass s | target |", "|---|---|---|---|---|"]
+             "minimum wall time, the median less the bare interpreter's, and the median CPU time (user + sys).", "",
+             "| command | median s | min s | median - python -c pass s | median CPU s | target |",
+             "|---|---|---|---|---|---|"]
     for name, _, target in cmds:
         t = times[name]
         lines.append(f"| {name} | {statistics.median(t):.2f} | {min(t):.2f} | "
-                     f"{statistics.median(t) - bare:.2f} | {target or ''} |")
+                     f"{statistics.median(t) - bare:.2f} | {statistics.median(cpu[name]):.2f} | {target or ''} |")
     lines += ["", "Largest imports (`python -X importtime`, cumulative ms, top level and one below):", ""]
     for name, rows in imports.items():
         lines.append(f"- {name}: " + ", ".join(f"{mod} {ms:.0f}" for ms, mod in rows))

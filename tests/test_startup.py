@@ -39,3 +39,23 @@ def test_public_names_resolve_lazily_to_the_functions_not_the_submodules():
             "assert skinfit.Fit is sys.modules['skinfit.fit'].Fit\n"
             "assert set(skinfit.__all__) <= set(dir(skinfit))")
     subprocess.run([sys.executable, "-c", "import sys\n" + code], check=True)
+
+
+def test_skinfit_fit_builds_no_unit_registry_and_leaves_distributed_alone(tmp_path):
+    """``skinfit fit`` of the shipped electroadhesion dataset (units V and mN): the units are read
+    without pint's UnitRegistry, and writing fit.nc does not import Dask's ``distributed``
+    (which xarray's writer imports to look for a scheduler); afterwards ``distributed`` imports
+    as usual, and the file holds every group."""
+    out = tmp_path / "run"
+    code = (f"from skinfit.cli import main\nassert main(['fit', 'electroadhesion', 'electroadhesion_synthetic', "
+            f"'--out', {str(out)!r}, '--seed', '1', '--quiet']) == 0\n"
+            "import skinfit.units\nprint('registry', skinfit.units._REGISTRY)\n"
+            "print('distributed imported', 'distributed' in sys.modules)\n"
+            "import distributed\n")
+    probe = "import sys\n" + code
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert "registry None" in result.stdout and "distributed imported False" in result.stdout
+    from skinfit.fit import GROUPS, load_fit
+
+    fit = load_fit(out)
+    assert set(fit.idata.children) == set(GROUPS) - {"derived"} and fit.attr("misfit")["checks"]
