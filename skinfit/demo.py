@@ -51,7 +51,8 @@ def demo_plan(seed):
             key = zlib.crc32(f"{ds_id}/{model_id}".encode())
             fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
             plan.append({"dataset": ds_id, "model": model_id, "seed": fit_seed, "split": split,
-                         "rows": options.get("rows", {}), "why": options.get("why", ""),
+                         "rows": options.get("rows", {}), "n_rows": len(_select(ds, options.get("rows", {}))),
+                         "why": options.get("why", ""),
                          "max_steps": options.get("max_steps", {}).get(model_id, 20000)})
         if options.get("by"):  # the dataset's model on every other group too (``group`` set)
             col = options["by"]
@@ -62,7 +63,7 @@ def demo_plan(seed):
                 key = zlib.crc32(f"{ds_id}/{ds.model}/{col}={level}".encode())
                 fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
                 plan.append({"dataset": ds_id, "model": ds.model, "seed": fit_seed, "split": {},
-                             "rows": {col: level}, "why": "", "group": f"{col}={level}", "max_steps": 20000})
+                             "rows": {col: level}, "n_rows": len(_select(ds, {col: level})), "why": "", "group": f"{col}={level}", "max_steps": 20000})
     return plan
 
 
@@ -151,6 +152,7 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     loaded = {}
     reused = [_reuse(path, p, loaded) for p, path in zip(plan, paths)]
     todo = [(p, path) for p, path, f in zip(plan, paths, reused) if f is None]
+    todo.sort(key=lambda t: -t[0]["n_rows"])  # larger fits first: the workers finish together
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
          f"datasets ({len(plan) - len(todo)} already done under {out})")
     for p in plan:
