@@ -8,6 +8,7 @@ if TYPE_CHECKING:  # names used only in annotations
     from collections.abc import Mapping, Sequence
     from .fit import Fit
 
+import json
 import warnings
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from .evidence import evidence
 from .evidence_methods import bayes_factor_strength
 from .run_labels import run_labels
 
-__all__ = ["compare", "loo", "cli_compare"]
+__all__ = ["compare", "loo", "loo_record", "cli_compare"]
 
 
 def loo(fit):
@@ -40,6 +41,22 @@ def loo(fit):
         return az_loo(combined, var_name="total")
 
 
+def loo_record(fit: Fit) -> dict:
+    """PSIS-LOO of a fit as ``{elpd, se, p, pareto_k_gt_0.7, rows}``, computed once and cached
+    in ``fit.attrs["loo"]`` (save the fit to keep it), as :func:`skinfit.evidence.evidence`
+    caches log Z: the pointwise log-likelihood it is computed from is a function of the saved
+    draws and seed, so the cached numbers are those a recomputation gives."""
+    cached = fit.attrs.get("loo")
+    if cached:
+        return json.loads(cached)
+    lo = loo(fit)
+    k = np.asarray(lo.pareto_k).ravel()
+    record = {"elpd": float(lo.elpd), "se": float(lo.se), "p": float(lo.p),
+              "pareto_k_gt_0.7": int((k > 0.7).sum()), "rows": int(k.size)}
+    fit.attrs["loo"] = json.dumps(record)
+    return record
+
+
 def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
             rng: int | np.random.Generator | None = None) -> pd.DataFrame:
     """One table ranked by log evidence: log Z +- se, log Bayes factor against the best with its
@@ -56,11 +73,10 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
     rows = []
     for f, label in zip(fits, run_labels(fits)):  # two runs of one model: labelled by their options
         ev = evidence(f, method=method, rng=rng)
-        lo = loo(f)
-        k = np.asarray(lo.pareto_k).ravel()
+        lo = loo_record(f)
         rows.append({"model": label, "log_z": ev.log_z, "log_z_se": ev.se, "method": ev.method,
-                     "approximate": ev.approximate, "elpd_loo": float(lo.elpd), "elpd_loo_se": float(lo.se),
-                     "p_loo": float(lo.p), "pareto_k_gt_0.7": int((k > 0.7).sum()),
+                     "approximate": ev.approximate, "elpd_loo": lo["elpd"], "elpd_loo_se": lo["se"],
+                     "p_loo": lo["p"], "pareto_k_gt_0.7": lo["pareto_k_gt_0.7"],
                      "converged": f.converged})
     table = pd.DataFrame(rows).sort_values("log_z", ascending=False).reset_index(drop=True)
     best = table.iloc[0]

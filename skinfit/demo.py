@@ -51,7 +51,8 @@ def demo_plan(seed):
             key = zlib.crc32(f"{ds_id}/{model_id}".encode())
             fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
             plan.append({"dataset": ds_id, "model": model_id, "seed": fit_seed, "split": split,
-                         "rows": options.get("rows", {}), "why": options.get("why", ""),
+                         "rows": options.get("rows", {}), "n_rows": len(_select(ds, options.get("rows", {}))),
+                         "why": options.get("why", ""),
                          "max_steps": options.get("max_steps", {}).get(model_id, 20000)})
         if options.get("by"):  # the dataset's model on every other group too (``group`` set)
             col = options["by"]
@@ -62,7 +63,7 @@ def demo_plan(seed):
                 key = zlib.crc32(f"{ds_id}/{ds.model}/{col}={level}".encode())
                 fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
                 plan.append({"dataset": ds_id, "model": ds.model, "seed": fit_seed, "split": {},
-                             "rows": {col: level}, "why": "", "group": f"{col}={level}", "max_steps": 20000})
+                             "rows": {col: level}, "n_rows": len(_select(ds, {col: level})), "why": "", "group": f"{col}={level}", "max_steps": 20000})
     return plan
 
 
@@ -83,7 +84,9 @@ def _select(ds, rows):
 
 
 def _run_one(item, path):
-    """Fit one plan item and save it (top level: runs in a worker process)."""
+    """Fit one plan item, compute what the comparison reads (log Z by bridge sampling and
+    PSIS-LOO, cached in the fit's attributes, each from its own fixed seed) and save it (top
+    level: runs in a worker process, so these costs are spread over the workers too)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from .data import load_dataset
     from .fit import fit
@@ -92,16 +95,30 @@ def _run_one(item, path):
     ds = _select(load_dataset(item["dataset"]), item["rows"])
     result = fit(item["model"], ds, rng=item["seed"], split=item["split"] or None,
                  max_steps=item["max_steps"])
+    if not item.get("group"):  # a compared fit (see run_demo)
+        _comparison_records(result)
     result.save(path)
     return {"model": item["model"], "dataset": item["dataset"], "seconds": time.perf_counter() - t0,
             "converged": result.converged}
 
 
-def _done(path, item):
-    """A saved fit with this item's seed on the same data, model card, priors and sampler
-    settings (an edited file, or another sampler, and the item is fitted again)."""
+def _comparison_records(fit):
+    """Evidence and LOO of ``fit`` into its attributes; True when either was computed now."""
+    from .compare import loo_record
+    from .evidence import evidence
+
+    had = bool(json.loads(fit.attrs.get("evidence", "{}")).get("bridge")) and "loo" in fit.attrs
+    evidence(fit)
+    loo_record(fit)
+    return not had
+
+
+def _reuse(path, item, datasets):
+    """The saved fit of this item, when it has the item's seed and was made on the same data,
+    model card, priors and sampler settings; else None (an edited file, or another sampler,
+    and the item is fitted again). ``datasets`` caches the loaded datasets by id."""
     if not path.exists():
-        return False
+        return None
     from .data import load_dataset
     from .fit import load_fit
     from .models import load_model
@@ -111,13 +128,16 @@ def _done(path, item):
     try:
         saved = load_fit(path)
         attrs = saved.attrs
-        data = _select(load_dataset(item["dataset"]), item["rows"])
-        return (int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
+        if item["dataset"] not in datasets:
+            datasets[item["dataset"]] = load_dataset(item["dataset"])
+        data = _select(datasets[item["dataset"]], item["rows"])
+        same = (int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
                 and attrs.get("model_sha256") == load_model(item["model"]).sha256
                 and attrs.get("priors_sha256") == load_priors(item["model"]).sha256
                 and saved.attr("sampler").get("settings") == sampler_settings())
     except Exception:  # a damaged or foreign file: fit again
-        return False
+        return None
+    return saved if same else None
 
 
 def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, datasets=None, echo=print):
@@ -129,7 +149,10 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     out = Path(out)
     plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]
     paths = [_path(out, p) for p in plan]
-    todo = [(p, path) for p, path in zip(plan, paths) if not _done(path, p)]
+    loaded = {}
+    reused = [_reuse(path, p, loaded) for p, path in zip(plan, paths)]
+    todo = [(p, path) for p, path, f in zip(plan, paths, reused) if f is None]
+    todo.sort(key=lambda t: -t[0]["n_rows"])  # larger fits first: the workers finish together
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
          f"datasets ({len(plan) - len(todo)} already done under {out})")
     for p in plan:
@@ -144,18 +167,17 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
                 r = fut.result()
                 flag = "converged" if r["converged"] else "NOT CONVERGED (see the report)"
                 echo(f"  done {r['dataset']} / {r['model']}: {r['seconds']:.1f} s, {flag}")
-    fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""): load_fit(path)
-            for p, path in zip(plan, paths)}
+    fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
+            f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
     comparisons = {}
     for ds_id in dict.fromkeys(p["dataset"] for p in plan):
         items = [(name, f, p) for (name, f), p in zip(fits.items(), plan)
                  if p["dataset"] == ds_id and not p.get("group")]  # the competing models on the same rows
         if len(items) > 1:
-            had = [bool(json.loads(f.attrs.get("evidence", "{}")).get("bridge")) for _, f, _ in items]
+            for _, f, p in items:
+                if _comparison_records(f):  # a fit saved by an older demo: keep them with it
+                    f.save(_path(out, p))
             comparisons[ds_id] = compare([f for _, f, _ in items])
-            for (_, f, p), known in zip(items, had):
-                if not known:
-                    f.save(_path(out, p))  # keep the evidence with the fit (a reused fit has it)
             echo(f"\n{ds_id}: ranked by evidence\n"
                  + comparisons[ds_id][["log_z", "log_z_se", "log_bf_vs_best", "strength", "elpd_loo"]]
                  .to_string(float_format="{:.4g}".format))

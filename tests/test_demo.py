@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 import skinfit
 from skinfit.cli import main
 from skinfit.demo import demo_plan
@@ -32,10 +34,16 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
     assert (report / "index.html").exists() and (report / "comparison_electroadhesion_synthetic.csv").exists()
     plan = json.loads((report / "demo_plan.json").read_text())
     assert [p["model"] for p in plan] == ["electroadhesion", "electroadhesion_coulomb", "electroadhesion_empirical"]
-    for p in plan:  # every fit converged and carries its evidence for later reports
+    from skinfit.compare import loo
+
+    for p in plan:  # every fit converged and carries its evidence and LOO for later reports
         fit = skinfit.load_fit(out / p["dataset"] / p["model"] / "fit.nc")
         assert fit.converged, p["model"]
         assert "bridge" in json.loads(fit.idata.attrs["evidence"])
+        # computed in the worker before saving: the numbers ArviZ gives on the saved file
+        cached, fresh = json.loads(fit.attrs["loo"]), loo(fit)
+        assert cached["elpd"] == pytest.approx(float(fresh.elpd), rel=1e-12)
+        assert cached["se"] == pytest.approx(float(fresh.se), rel=1e-12)
     # a second run reuses the saved fits
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic"]) == 0
     assert "(3 already done" in capsys.readouterr().out
@@ -44,4 +52,4 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(sampling, "TAU_KEEP", 5.0)
     item = next(p for p in plan if p["model"] == "electroadhesion")
-    assert not demo._done(out / item["dataset"] / item["model"] / "fit.nc", item)
+    assert demo._reuse(out / item["dataset"] / item["model"] / "fit.nc", item, {}) is None
