@@ -495,6 +495,7 @@ class Fit:
         self._tree = idata
         self._posterior = posterior
         self._deferred = deferred
+        self._summary = None  # (key, table) of the last summary(): see _summary_key
 
     @property
     def pending(self):
@@ -604,7 +605,30 @@ class Fit:
         positive parameters): near 1 the data determined the parameter; below 0.5 the
         posterior is mostly its prior and ``note`` says so (e.g. ``tau0`` of electroadhesion,
         which the forces determine only through tau0*beta0 and tau0*phi).
+
+        Computed once per content (a copy returned): a report asks for it several times a fit.
         """
+        key = self._summary_key()
+        if self._summary is not None and self._summary[0] == key:
+            return self._summary[1].copy()
+        table = self._compute_summary()
+        self._summary = (key, table)
+        return table.copy()
+
+    def _summary_key(self):
+        """What :meth:`summary` is computed from: the posterior and derived draws (hashed, ~1 ms
+        a MB) and the warnings it shows."""
+        import hashlib
+
+        h = hashlib.sha256(self._tree.attrs.get("warnings", "").encode())
+        for group in ("posterior", "derived"):
+            if group in self._tree.children:
+                for name, da in sorted(self._tree[group].data_vars.items()):
+                    h.update(name.encode())
+                    h.update(np.ascontiguousarray(da.values).tobytes())
+        return h.hexdigest()
+
+    def _compute_summary(self):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             from arviz_stats import summary

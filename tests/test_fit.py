@@ -57,6 +57,20 @@ def test_summary_columns_and_diagnostics(ea_fit):
     assert f"importance start {t['start_s'] - t['map_s']:.2f} s" in text
 
 
+def test_summary_is_computed_once_per_content(ea_fit, tmp_path):
+    """The cached summary is a copy, and an edited posterior or a new warning is a new summary
+    (a saved copy of the fit is edited: the session's fit stays as it is)."""
+    fit = skinfit.load_fit(ea_fit.save(tmp_path / "fit.nc"))
+    first = fit.summary()
+    first.loc["alpha", "mean"] = -1.0  # the caller's copy, not the cache
+    assert fit.summary().loc["alpha", "mean"] == pytest.approx(float(fit.group("posterior")["alpha"].mean()))
+    fit.idata["posterior"]["alpha"].values[...] *= 2.0  # in place: the draws changed
+    assert fit.summary().loc["alpha", "mean"] == pytest.approx(2 * ea_fit.summary().loc["alpha", "mean"])
+    fit.attrs["warnings"] = json.dumps(fit.warnings + [{"check": "bound", "parameter": "alpha", "status": "WARN",
+                                                        "message": "made up"}])
+    assert "ON A BOUND: made up" in fit.summary().loc["alpha", "note"]
+
+
 def test_result_tree_groups_and_provenance(ea_fit):
     tree = ea_fit.idata
     assert list(tree.children) == ["posterior", "prior", "sample_stats", "log_likelihood", "posterior_predictive",
