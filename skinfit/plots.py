@@ -858,20 +858,53 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
     return _finish(fig, path)
 
 
-def plot_rank(fit, path=None, *, var_names=None):
-    """ArviZ's rank ECDF plot (walkers as chains); rank histograms if ArviZ cannot draw it."""
+def _walker_groups(fit, n_groups=4):
+    """The posterior as ``n_groups`` chains, each the draws of a block of emcee's walkers one
+    walker after another (walkers are not independent chains; :func:`plot_trace` groups them
+    the same way), as a DataTree for arviz-plots."""
+    import xarray as xr
+
+    post = fit.group("posterior")
+    groups = np.array_split(np.arange(post.sizes["chain"]), min(n_groups, post.sizes["chain"]))
+    size = min(len(g) for g in groups)
+    out = {}
+    for name, da in post.data_vars.items():
+        da = da.transpose("chain", "draw", ...)
+        parts = [da.isel(chain=g[:size]).values.reshape(1, -1, *da.shape[2:]) for g in groups]
+        out[name] = (("chain", "draw", *da.dims[2:]), np.concatenate(parts))
+    ds = xr.Dataset(out, coords={d: post[d] for d in post.dims if d not in ("chain", "draw")})
+    ds = ds.assign_coords(chain=np.arange(len(groups)), draw=np.arange(ds.sizes["draw"]))
+    return xr.DataTree.from_dict({"posterior": ds})
+
+
+def plot_rank(fit, path=None, *, var_names=None, n_groups=4, ncols=4):
+    """ArviZ's (arviz-plots) rank ECDF plot, the walkers pooled into ``n_groups`` chains, in
+    the report's palette, width and >= 8 pt text (bench/results/arviz_plots.md measured these
+    settings against the layout rules)."""
     fit = _as_fit(fit)
     _ensure_backend()
     import arviz_plots as azp
+    import matplotlib as mpl
     import matplotlib.pyplot as plt
+    from arviz_base import rcParams
+    from cycler import cycler
 
-    try:
-        pc = azp.plot_rank(fit.group("posterior"), var_names=var_names, backend="matplotlib")
-        fig = pc.viz["figure"].item()
-    except (ValueError, KeyError, TypeError):  # e.g. more panels than plot.max_subplots
-        return plot_trace(fit, path, var_names=var_names)
-    plt.close(fig)  # keep pyplot's registry clean; the Figure stays usable
-    _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: rank ECDF per walker")
+    tree = _walker_groups(fit, n_groups)
+    n = sum(int(np.prod([s for d, s in da.sizes.items() if d not in ("chain", "draw")] or [1]))
+            for name, da in tree["posterior"].data_vars.items() if var_names is None or name in var_names)
+    cols = max(1, min(ncols, n))
+    size = (min(3.0 * cols, MAX_WIDTH), 2.3 * -(-n // cols) + 0.7)
+    rc = {"axes.prop_cycle": cycler(color=list(_COLOURS)), "font.size": 9, "axes.titlesize": 9,
+          "axes.labelsize": 9, "xtick.labelsize": MIN_FONT, "ytick.labelsize": MIN_FONT,
+          "legend.fontsize": MIN_FONT}
+    from arviz_base import rc_context as az_rc_context
+
+    with mpl.rc_context(rc), az_rc_context({"plot.max_subplots": max(n, rcParams["plot.max_subplots"])}):
+        pc = azp.plot_rank(tree, var_names=var_names, backend="matplotlib", col_wrap=cols,
+                           figure_kwargs={"figsize": size, "figsize_units": "inches", "layout": "constrained"})
+        fig = pc.viz["figure"].item() if hasattr(pc, "viz") else pc.get_viz("figure")
+        plt.close(fig)  # keep pyplot's registry clean; the Figure stays usable
+        _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: rank ECDF ({len(tree['posterior'].chain)} walker groups)")
     return _finish(fig, path)
 
 

@@ -377,7 +377,7 @@ def test_reference_curve_of_the_wavy_surface(standin, tmp_path):
 from layout import layout_problems  # noqa: E402  (tests/layout.py)
 
 FIGURES = [("ppc", plots.plot_ppc), ("pair", plots.plot_pair), ("trace", plots.plot_trace),
-           ("prior_posterior", plots.plot_prior_posterior)]
+           ("prior_posterior", plots.plot_prior_posterior), ("rank", plots.plot_rank)]
 
 
 @pytest.mark.parametrize("model,dataset", CASES, ids=[f"{m}-{d}" for m, d in CASES])
