@@ -592,7 +592,7 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         separable = all(posts[0].slots[j].transform in ("log", "identity", "shift_log") for j in range(posts[0].ndim))
         moments = [(z.mean(axis=0), np.cov(z.T)) for z in zdraws]
         out = run_gibbs(posts, moments, zdraws, spec, rng, chains=chains, burn=burn, ess_target=ess_target,
-                        rhat_max=rhat_max, max_sweeps=max_sweeps, scale_move=separable)
+                        rhat_max=rhat_max, max_sweeps=max_sweeps, shift_move=separable)
         shrunk = out["theta"][..., index]
         sampler = {"method": "gibbs (Metropolis-within-Gibbs)", "chains": chains, "sweeps": out["sweeps"],
                    "burn": out["burn"], "thin": out["thin"], "converged": out["converged"], "checks": out["checks"],
