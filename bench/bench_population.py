@@ -190,6 +190,7 @@ def main():
     ap.add_argument("--hyper-prior", action="store_true",
                     help="coverage with each population drawn from the hyper-prior (per-subject calibration)")
     ap.add_argument("--presses", type=int, nargs="+", default=[2, 6])
+    ap.add_argument("--seed", type=int, default=7, help="seed of the coverage simulations")
     ap.add_argument("--fits-only", action="store_true", help="only fit (and cache) the subjects")
     ap.add_argument("--out", default=str(ROOT / "bench/results/population.json"))
     args = ap.parse_args()
@@ -211,7 +212,7 @@ def main():
         path.write_text(json.dumps(res, indent=1, default=str))
     if not args.skip_coverage:
         key = "coverage_hyper_prior" if args.hyper_prior else "coverage"
-        res[key] = coverage(args.populations, presses_list=args.presses,
+        res[key] = coverage(args.populations, args.seed, presses_list=args.presses,
                             hyper=None if args.hyper_prior else (np.log(0.5), 0.05))
         path.write_text(json.dumps(res, indent=1, default=str))
 

@@ -4,12 +4,14 @@ reweighting of the separate fits (``method="reweight"``).
 Choice, by measurement (bench/bench_population.py, bench/results/population.md): the Gibbs
 sampler of :mod:`skinfit.hierarchical` (each subject's full parameter vector by independence
 Metropolis-Hastings from its own fit's Gaussian approximation times the current population,
-all chains in one likelihood call per subject; hyper-parameters from their exact conditionals)
-converges (R-hat <= 1.01, bulk and tail ESS >= 400 for every hyper-parameter) for 13
-contact_area subjects x 4 parameters in 2.5 s CPU and x 8 in 12.9 s, where the emcee
-hyper-posterior over reweighted draws took 80-84 s for 4 parameters and did not converge for 8
-(3-18 effective draws per subject).  Reweighting is kept (``method="reweight"``) for one or two
-parameters with many draws per subject, where it agrees with Gibbs within Monte Carlo error
+all subjects and chains in one likelihood call; hyper-parameters from their exact
+conditionals; location and scale moves along the non-centred coordinates for weakly informed
+parameters) converges (R-hat <= 1.01, bulk and tail ESS >= 400 for every hyper-parameter)
+for 13 contact_area subjects x 8 parameters in about 10 s CPU and for 100 simulated subjects x
+10 in 154 s, where the emcee hyper-posterior over reweighted draws took 80-84 s for 4
+parameters and did not converge for 8 (3-18 effective draws per subject).  Reweighting is kept
+(``method="reweight"``) for one or two parameters with many draws per subject, where it agrees
+with Gibbs within Monte Carlo error
 (tests/test_population.py::test_gibbs_and_reweighting_agree_on_the_hyper_posterior).
 
 Model, per population parameter ``j`` (a sampled slot: a parameter, one level of a split
