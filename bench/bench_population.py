@@ -80,70 +80,79 @@ def fitted(work, name, dataset):
     return run
 
 
-def timed(run, params, **kw):
+def timed(fits, params, **kw):
+    """Time the population step on loaded fits (loading, ~0.2 s a fit, is not included)."""
+    load0 = os.getloadavg()[0]
     t0, c0 = time.perf_counter(), time.process_time()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PopulationWarning)
-        r = population(load_run(run), params, rng=1, **kw)
+        r = population(fits, params, rng=1, **kw)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     d = r.diagnostics()
     return r, {"subjects": len(r.subjects), "parameters": len(r.parameters), "wall_s": round(wall, 1),
-               "cpu_s": round(cpu, 1), "sweeps": r.sampler.get("sweeps"), "converged": r.converged,
+               "cpu_s": round(cpu, 1), "load_average": [round(load0, 2), round(os.getloadavg()[0], 2)],
+               "sweeps": r.sampler.get("sweeps"), "converged": r.converged,
                "rhat_max": round(float(d["r_hat"].max()), 4),
                "ess_bulk_min": round(float(d["ess_bulk"].min())), "ess_tail_min": round(float(d["ess_tail"].min())),
                "warnings": [str(w.message) for w in caught]}
 
 
-def sizes(work, reweight):
+SIZES = ("13x4", "13x8", "13x10", "50x10", "100x10", "13x4c", "13x8c")
+
+
+def sizes(work, reweight, only=None):
+    """The timing table; ``only`` (labels of SIZES) picks rows.  The simulated sizes are the
+    first 13 / 50 subjects of one 100-subject run (fitted once, cached in ``work``)."""
     four = ["alpha_a0", "m0", "beta_z0", "n_z0"]
     eight = four + ["alpha_a1", "m1", "beta_z1", "n_z1"]
     ten = eight + ["sigma_contact_area", "sigma_impedance"]
+    only = set(only or SIZES)
     shipped = fitted(work, "ca13", "contact_area_synthetic")
-    sim = simulate_contact(work, 100)
-    runs = {n: fitted(work, f"pop{n}", _subset(sim, work, n)) for n in (13, 50, 100)}
+    sim = None
+    if only & {"13x10", "50x10", "100x10"}:
+        sim = load_run(fitted(work, "pop100", simulate_contact(work, 100)))
+    table = [("13x4", "13 shipped x 4", shipped, four, {}), ("13x8", "13 shipped x 8", shipped, eight, {}),
+             ("13x10", "13 sim x 10", 13, ten, {}), ("50x10", "50 sim x 10", 50, ten, {}),
+             ("100x10", "100 sim x 10", 100, ten, {}),
+             ("13x4c", "13 shipped x 4, correlated", shipped, four, {"correlated": True}),
+             ("13x8c", "13 shipped x 8, correlated", shipped, eight, {"correlated": True})]
     rows = []
-    for label, run, params in [("13 shipped x 4", shipped, four), ("13 shipped x 8", shipped, eight),
-                               ("13 sim x 10", runs[13], ten), ("50 sim x 10", runs[50], ten),
-                               ("100 sim x 10", runs[100], ten)]:
-        r, row = timed(run, params)
+    for key, label, run, params, kw in table:
+        if key not in only:
+            continue
+        fits = dict(list(sim.items())[:run]) if isinstance(run, int) else load_run(run)
+        r, row = timed(fits, params, **kw)
         row["size"] = label
-        if label == "13 shipped x 8":
+        if key == "13x8":
             row["effects"] = r.effects().to_dict("records")
         rows.append(row)
         print(row, flush=True)
     if reweight:
-        _, row = timed(shipped, four, method="reweight")
+        _, row = timed(load_run(shipped), four, method="reweight")
         row["size"] = "13 shipped x 4, method=reweight"
         rows.append(row)
         print(row, flush=True)
     return rows
 
 
-def _subset(sim, work, n):
-    if n == 100:
-        return sim
-    out = work / f"contact_area_pop{n}"
-    out.mkdir(exist_ok=True)
-    card = (sim / "dataset.toml").read_text().replace('id = "contact_area_pop100"', f'id = "contact_area_pop{n}"')
-    (out / "dataset.toml").write_text(card)
-    lines = (sim / "data.csv").read_text().splitlines()
-    keep = {f"P{i + 1:03d}" for i in range(n)}
-    (out / "data.csv").write_text("\n".join([lines[0]] + [x for x in lines[1:] if x.split(",")[0] in keep]) + "\n")
-    return out
-
-
-def coverage(n_pop=20, seed=7):
+def coverage(n_pop=20, seed=7, presses_list=(2, 6), hyper=(np.log(0.5), 0.05)):
+    """Coverage and squared error of the shrunk and separate subject intervals over ``n_pop``
+    simulated populations of 13 Coulomb subjects.  ``hyper``: the fixed (mu, tau) of log mu,
+    or None to draw each population from the sampler's hyper-prior (then the shrunk intervals
+    must cover at their nominal rates on average: per-subject calibration).  The spread of
+    the coverage is a cluster bootstrap over populations (the 13 subjects of a population
+    share its hyper-posterior, so the binomial sd understates it)."""
     from popsim import draw_population, subject_fits
 
     rng = np.random.default_rng(seed)
+    boot = np.random.default_rng(seed + 1)
     out = {}
-    for presses in (2, 6):
-        hits = {k: {50: 0, 90: 0, 95: 0} for k in ("shrunk", "separate")}
+    for presses in presses_list:
+        hits = {k: {50: [], 90: [], 95: []} for k in ("shrunk", "separate")}
         err = {"shrunk": [], "separate": []}
-        n = 0
         t0 = time.process_time()
         for _ in range(n_pop):
-            _, _, theta = draw_population(rng, "lognormal", 13, hyper=(np.log(0.5), 0.05))
+            _, _, theta = draw_population(rng, "lognormal", 13, hyper=hyper)
             fits = subject_fits(rng, theta, presses)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -151,13 +160,22 @@ def coverage(n_pop=20, seed=7):
             for prob in (50, 90, 95):
                 t = r.subject_summary(prob=prob / 100)
                 for k in hits:
-                    hits[k][prob] += int(np.sum((t[f"{k}_lower"] < theta) & (theta < t[f"{k}_upper"])))
+                    hits[k][prob].append(int(np.sum((t[f"{k}_lower"] < theta) & (theta < t[f"{k}_upper"]))))
             for k in err:
-                err[k] += list((np.log(t[k]) - np.log(theta)) ** 2)
-            n += 13
-        out[presses] = {"truths": n, "coverage": {k: {p: v / n for p, v in h.items()} for k, h in hits.items()},
-                        "mse_log": {k: float(np.mean(v)) for k, v in err.items()}, "cpu_s": round(time.process_time() - t0)}
-        print(presses, out[presses], flush=True)
+                err[k].append(float(np.mean((np.log(t[k]) - np.log(theta)) ** 2)))
+        row = {"populations": n_pop, "truths": 13 * n_pop, "coverage": {}, "cluster_bootstrap_95": {},
+               "binomial_sd": {}, "mse_log": {k: float(np.mean(v)) for k, v in err.items()},
+               "hits_per_population": hits, "cpu_s": round(time.process_time() - t0)}
+        for k, h in hits.items():
+            row["coverage"][k], row["cluster_bootstrap_95"][k], row["binomial_sd"][k] = {}, {}, {}
+            for prob, v in h.items():
+                v = np.asarray(v) / 13
+                pick = boot.integers(0, n_pop, (4000, n_pop))
+                row["coverage"][k][prob] = float(v.mean())
+                row["cluster_bootstrap_95"][k][prob] = [float(q) for q in np.quantile(v[pick].mean(axis=1), [0.025, 0.975])]
+                row["binomial_sd"][k][prob] = float(np.sqrt(prob / 100 * (1 - prob / 100) / (13 * n_pop)))
+        out[presses] = row
+        print(presses, {k: row[k] for k in ("coverage", "cluster_bootstrap_95", "mse_log", "cpu_s")}, flush=True)
     return out
 
 
@@ -167,6 +185,13 @@ def main():
     ap.add_argument("--skip-sizes", action="store_true")
     ap.add_argument("--skip-coverage", action="store_true")
     ap.add_argument("--reweight", action="store_true")
+    ap.add_argument("--only", nargs="+", choices=SIZES, help="rows of the timing table to run (default all)")
+    ap.add_argument("--populations", type=int, default=20, help="simulated populations per coverage run")
+    ap.add_argument("--hyper-prior", action="store_true",
+                    help="coverage with each population drawn from the hyper-prior (per-subject calibration)")
+    ap.add_argument("--presses", type=int, nargs="+", default=[2, 6])
+    ap.add_argument("--seed", type=int, default=7, help="seed of the coverage simulations")
+    ap.add_argument("--fits-only", action="store_true", help="only fit (and cache) the subjects")
     ap.add_argument("--out", default=str(ROOT / "bench/results/population.json"))
     args = ap.parse_args()
     work = Path(args.work)
@@ -176,11 +201,19 @@ def main():
     res["machine"] = f"{platform.node()} {platform.machine()}, {os.cpu_count()} cores"
     res["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     res["load_average_at_start"] = os.getloadavg()
+    if args.fits_only:
+        fitted(work, "ca13", "contact_area_synthetic")
+        fitted(work, "pop100", simulate_contact(work, 100))
+        return
     if not args.skip_sizes:
-        res["sizes"] = sizes(work, args.reweight)
+        new = sizes(work, args.reweight, args.only)
+        keep = [r for r in res.get("sizes", []) if r["size"] not in {n["size"] for n in new}]
+        res["sizes"] = keep + new
         path.write_text(json.dumps(res, indent=1, default=str))
     if not args.skip_coverage:
-        res["coverage"] = coverage()
+        key = "coverage_hyper_prior" if args.hyper_prior else "coverage"
+        res[key] = coverage(args.populations, args.seed, presses_list=args.presses,
+                            hyper=None if args.hyper_prior else (np.log(0.5), 0.05))
         path.write_text(json.dumps(res, indent=1, default=str))
 
 

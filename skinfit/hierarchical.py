@@ -1,6 +1,13 @@
 """Metropolis-within-Gibbs for a population of subjects: the sampler behind
 :func:`skinfit.population.population` (``method="gibbs"``).
 
+Choices, by measurement (bench/results/population.md, CPU s on 13 contact_area subjects x 8
+parameters): the likelihood of all subjects in one forward call (:class:`_Stacked`, checked
+against the per-subject calls at the start) took the run from 23.4 to 12.6 s CPU with the
+same chain (the per-subject calls were 60% of it); joint location-and-scale moves along the
+non-centred coordinates (3. below) for the parameters whose subjects are weakly informed,
+with convergence checks on the thinned draws at growing intervals, 12.6 -> 10.2 s.
+
 State per chain: every subject's full sampled vector ``z_i`` (its Posterior's sampling
 coordinates: population parameters, noise scales and any parameter left per subject) and the
 hyper-parameters ``mu``, ``Sigma`` of the population parameters in their population coordinate
@@ -22,11 +29,14 @@ hyper-parameters ``mu``, ``Sigma`` of the population parameters in their populat
    and, when correlated, every correlation is uniform on (-1, 1).  Independent populations
    use the same half-t(2, s_k) through its inverse-gamma pair.  Student-t populations
    (``nu_t = 4``) add per-subject precision weights ``w ~ Gamma`` (scale-mixture form).
-3. **Scale move** (independent populations): ``tau_j -> tau_j e^eps`` with every subject's
-   ``u_ij`` moved along ``mu_j + tau_j eta_ij`` (the non-centred coordinates held fixed), a
-   Metropolis step that needs one more likelihood call per subject; it crosses the funnel
-   between ``tau`` and the subjects when their data are weak (few presses), where the
-   centred Gibbs updates alone move ``tau`` slowly.
+3. **Location and scale moves** (:func:`_shift_move`): ``mu_j -> mu_j + d``,
+   ``sd_j -> sd_j e^eps`` with every subject's ``u_ij`` moved along ``mu_j + sd_j eta_ij``
+   (the non-centred coordinates ``eta`` held fixed; for a correlated population
+   ``Sigma -> D Sigma D``), a Metropolis step with its Jacobian that needs one more
+   likelihood call for all subjects; one per weakly informed parameter and sweep.  It
+   crosses the funnel between the hyper-parameters and the subjects when their data are
+   weak (few presses, a slope with a condition), where the centred Gibbs updates alone move
+   ``mu`` and ``sd`` slowly.  Checked against quadrature (tests/test_population.py).
 
 The population density is not renormalised inside a parameter's prior bounds (which stay
 hard): exact when the population puts negligible mass outside them.
@@ -94,8 +104,15 @@ class _Subjects:
                 q = np.log(q) if lg else q
                 pm[i, k], pv[i, k] = q.mean(), q.var()
         self.prior_prec, self.prior_mean = 1.0 / pv, pm
-        self.rest_priors = [[(_LOGPDF[post.slots[j].prior.dist], post.slots[j].prior.args) for j in self.rest]
-                            for post in posts]
+        self.stacked = None
+        # prior of the other slots: one call per slot where every subject has the same prior
+        self.rest_priors = []
+        for j in self.rest:
+            pri = [post.slots[j].prior for post in posts]
+            if all(q.dist == pri[0].dist and dict(q.args) == dict(pri[0].args) for q in pri):
+                self.rest_priors.append((j, None, _LOGPDF[pri[0].dist], pri[0].args))
+            else:
+                self.rest_priors += [(j, i, _LOGPDF[q.dist], q.args) for i, q in enumerate(pri)]
 
     def transform(self, z):
         """Natural parameters and log-Jacobian of z (..., S, d) -> ((..., S, d), (..., S))."""
@@ -119,19 +136,45 @@ class _Subjects:
         return np.all((theta >= self.lo) & (theta <= self.hi), axis=-1)
 
     def log_likelihood(self, theta):
-        """theta (C, S, d) -> (C, S); -inf outside the prior bounds, one call per subject."""
+        """theta (C, S, d) -> (C, S); -inf outside the prior bounds.  One forward call for all
+        subjects (:class:`_Stacked`) where that reproduces the subjects' own likelihoods, else
+        one call per subject."""
         inside = self.inside(theta)
+        if self.stacked is not None:
+            with np.errstate(all="ignore"):
+                ll = np.where(inside, self.stacked(theta), -np.inf)
+        else:
+            ll = self._loop_likelihood(theta, inside)
+        if np.isnan(ll).any():
+            c, i = np.argwhere(np.isnan(ll))[0]
+            post = self.posts[i]
+            raise FloatingPointError(f"{post.model.id}: NaN log-likelihood at {dict(zip(post.names, theta[c, i]))}")
+        return ll
+
+    def _loop_likelihood(self, theta, inside):
         ll = np.full(theta.shape[:2], -np.inf)
         for i, post in enumerate(self.posts):
             ok = inside[:, i]
             if ok.any():
                 with np.errstate(all="ignore"):
                     ll[ok, i] = post.log_likelihood(theta[ok, i])
-        if np.isnan(ll).any():
-            c, i = np.argwhere(np.isnan(ll))[0]
-            post = self.posts[i]
-            raise FloatingPointError(f"{post.model.id}: NaN log-likelihood at {dict(zip(post.names, theta[c, i]))}")
         return ll
+
+    def use_stacked(self, theta):
+        """Switch to the one-call likelihood if it gives the subjects' own log-likelihoods at
+        ``theta`` (C, S, d) (the starting states) to 1e-9 relative; returns whether it does."""
+        try:
+            st = _Stacked(self.posts)
+        except _NotStackable:
+            return False
+        inside = self.inside(theta)
+        with np.errstate(all="ignore"):
+            a = np.where(inside, st(theta), -np.inf)
+        b = self._loop_likelihood(theta, inside)
+        fin = np.isfinite(b)
+        if np.array_equal(fin, np.isfinite(a)) and np.allclose(a[fin], b[fin], rtol=1e-9, atol=1e-9):
+            self.stacked = st
+        return self.stacked is not None
 
     def log_prior_part(self, theta, log_jac, mu, prec, spec):
         """Everything in a subject's conditional but the likelihood (up to a constant):
@@ -142,10 +185,67 @@ class _Subjects:
             r = u - mu[:, None, :]
             quad = np.einsum("...csi,csij,...csj->...cs", r, prec, r)
             lp = -0.5 * quad - np.where(spec.log, u, 0.0).sum(axis=-1) + log_jac  # du/dtheta = 1/theta
-            for i, pri in enumerate(self.rest_priors):
-                for j, (logpdf, args) in zip(self.rest, pri):
+            for j, i, logpdf, args in self.rest_priors:
+                if i is None:
+                    lp += logpdf(theta[..., j], args, None, None)
+                else:
                     lp[..., i] += logpdf(theta[..., i, j], args, None, None)
         return np.where(self.inside(theta) & np.isfinite(lp), lp, -np.inf)
+
+
+class _NotStackable(Exception):
+    pass
+
+
+class _Stacked:
+    """The log-likelihoods of all S subjects in one forward call: the subjects' distinct rows
+    (:meth:`Posterior._unique_rows`) concatenated (N rows), each parameter given per row as
+    (C, N), and the normal / log-normal sums of squares reduced per subject.  Needs one model,
+    the same constants and normal or log-normal noise; :meth:`_Subjects.use_stacked` checks
+    the result against the subjects' own likelihoods before it is used."""
+
+    def __init__(self, posts):
+        first = posts[0]
+        try:
+            same = all(p.model is first.model or p.model.id == first.model.id for p in posts) and all(
+                p.constants.keys() == first.constants.keys()
+                and all(np.array_equal(p.constants[k], first.constants[k]) for k in first.constants) for p in posts)
+        except (TypeError, ValueError):
+            same = False
+        if not same or any(p.noise[o] not in ("normal", "lognormal") for p in posts for o in p.observables) or any(
+                p.observables != first.observables or p._param_index_u.keys() != first._param_index_u.keys()
+                for p in posts):
+            raise _NotStackable
+        self.model, self.constants, self.observables = first.model, first.constants, first.observables
+        sizes = [p.n_unique for p in posts]
+        self.starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
+        self.row_subject = np.repeat(np.arange(len(posts)), sizes)
+        self.x = {c: np.concatenate([p._xu[c] for p in posts]) for c in first._xu}
+        self.slot = {k: np.concatenate([np.broadcast_to(p._param_index_u[k], (p.n_unique,)) for p in posts])
+                     for k in first._param_index_u}
+        self.counts = np.concatenate([p._counts for p in posts])
+        self.noise = {o: first.noise[o] for o in self.observables}
+        self.sigma = {o: f"sigma{first._suffix(o)}" for o in self.observables}
+        self.zbar = {o: np.concatenate([p._zbar[o] for p in posts]) for o in self.observables}
+        self.ssw = {o: np.concatenate([p._ssw[o] for p in posts]) for o in self.observables}
+        self.const = sum(np.array([0.5 * p.n * math.log(2 * math.pi) + p._sum_logy.get(o, 0.0) for p in posts])
+                         for o in self.observables)
+
+    def __call__(self, theta):
+        """theta (C, S, d) -> (C, S); not masked for prior bounds (the caller does)."""
+        C, N = len(theta), len(self.row_subject)
+        params = {k: theta[:, self.row_subject, j] for k, j in self.slot.items()}
+        pred, ok = self.model.forward(params, self.x, self.constants)
+        total = np.zeros((C, N))
+        for o in self.observables:
+            m = np.broadcast_to(pred[o], (C, N))
+            m = np.log(m) if self.noise[o] == "lognormal" else m
+            sigma = params[self.sigma[o]]
+            d = self.zbar[o] - m
+            total += 0.5 * (self.ssw[o] + self.counts * d * d) / (sigma * sigma) + self.counts * np.log(sigma)
+        ll = -np.add.reduceat(total, self.starts, axis=1) - self.const
+        ok = np.broadcast_to(np.asarray(ok), (C, N))
+        return np.where(np.logical_and.reduceat(ok, self.starts, axis=1), ll, -np.inf)
 
 
 def _pop_in_z(subs, mu, prec, spec):
@@ -232,7 +332,7 @@ def _inv_wishart(df, psi, rng):
 
 
 def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_target=400, rhat_max=1.01,
-              check_every=100, max_sweeps=20000, keep=1000, scale_move=True):
+              check_every=100, max_sweeps=20000, keep=1000, shift_move=True, stacked=True, moves="each"):
     """Sample the population posterior.
 
     Parameters
@@ -259,6 +359,8 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     subs = _Subjects(posts, moments, spec)
     z = np.stack([st[rng.choice(len(st), C, replace=len(st) < C)] for st in starts], axis=1)  # (C, S, d)
     theta, lj = subs.transform(z)
+    if stacked:
+        subs.use_stacked(theta)
     ll = subs.log_likelihood(theta)
     u = _u_of(theta, spec)
     mu = u.mean(axis=1)
@@ -268,17 +370,17 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     a = np.broadcast_to(spec.scale**2, (C, p)).copy()
     w = np.ones((C, S, p))
     accept = np.zeros(S)
-    scale_accept, n_scale, scale_factor, scale_base, log_sd = 0.0, 0, 0.3, np.ones(p), []
     # parameters whose subjects' data are weak against the population spread (a funnel between
-    # sd and the subjects, where centred Gibbs moves sd slowly) get the scale move: median
-    # within-subject variance of u against the between-subject variance of the separate means
+    # the hyper-parameters and the subjects, where centred Gibbs moves them slowly) get the
+    # non-centred moves: median within-subject variance of u against the between-subject
+    # variance of the separate means (recomputed from the burn-in's sds half-way through it)
     u_sep = [_u_of(subs.posts[i].to_theta(st), spec) for i, st in enumerate(starts)]
     within = np.median([np.var(x, axis=0) for x in u_sep], axis=0)
     between = np.var([np.mean(x, axis=0) for x in u_sep], axis=0)
     weak = within > 0.25 * np.maximum(between - within, 1e-3 * between)
-    scale_total, scale_n = 0.0, 0
+    shift = _ShiftMoves(moves if shift_move else "none", weak, np.sqrt(within / S), spec)
     draws = {"mu": [], "Sigma": [], "theta": []}
-    sweeps, checks, converged = 0, [], False
+    sweeps, checks, converged, next_check = 0, [], False, burn + check_every
     while sweeps < max_sweeps:
         # 1. every subject, all chains: independence Metropolis-Hastings
         prec = _pop_precision(Sigma, w, spec)  # (C, S, p, p)
@@ -301,33 +403,22 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
         u = _u_of(theta, spec)
         # 2. hyper-parameters from their exact conditionals
         mu, Sigma, a, w = _hyper_step(u, mu, Sigma, a, w, spec, rng)
-        # 3. scale move along the non-centred coordinates
-        if scale_move and not spec.correlated and weak.any():
-            take, z, ll, Sigma, theta = _scale_move(subs, z, ll, theta, u, mu, Sigma, a, spec,
-                                                    np.where(weak, scale_factor * scale_base, 0.0), rng)
-            n_scale += 1
-            scale_accept += take.mean()
-            if sweeps < burn:
-                log_sd.append(0.5 * np.log(np.diagonal(Sigma, axis1=1, axis2=2)))
-                if sweeps == burn // 2:  # weak parameters and steps from the burn-in so far
-                    recent = np.concatenate(log_sd[burn // 4:])
-                    weak = within > 0.25 * np.median(np.exp(2 * recent), axis=0)
-                    scale_base = np.std(recent, axis=0) + 1e-3
-                    scale_factor, scale_accept, n_scale = 2.38 / math.sqrt(max(weak.sum(), 1)), 0.0, 0
-                elif n_scale == 20:  # the common factor towards 25% acceptance
-                    scale_factor *= math.exp(scale_accept / n_scale - 0.25)
-                    scale_accept, n_scale = 0.0, 0
-            if sweeps >= burn:
-                scale_total += take.mean()
-                scale_n += 1
+        # 3. location and scale moves along the non-centred coordinates
+        for k, (d, eps) in enumerate(shift.steps(C, rng)):
+            took, z, ll, mu, Sigma, theta = _shift_move(subs, z, ll, theta, _u_of(theta, spec), mu, Sigma, a, spec,
+                                                        d, eps, rng)
+            shift.record(k, took, sweeps >= burn)
+        if sweeps < burn:
+            shift.adapt(sweeps, burn, mu, Sigma, within)
         sweeps += 1
         if sweeps > burn:
             draws["mu"].append(mu.copy())
             draws["Sigma"].append(Sigma.copy())
             draws["theta"].append(theta.copy())
-        n = sweeps - burn
-        if n > 0 and n % check_every == 0:
-            hyper = _hyper_draws(np.stack(draws["mu"], 1), np.stack(draws["Sigma"], 1), spec)
+        if sweeps >= next_check:  # on the draws as they would be kept (thinned to <= keep a chain)
+            n = sweeps - burn
+            th = max(1, math.ceil(n / keep))
+            hyper = _hyper_draws(np.stack(draws["mu"][::th], 1), np.stack(draws["Sigma"][::th], 1), spec)
             ess_b = min(float(np.min(az.ess(v))) for v in hyper.values())
             ess_t = min(float(np.min(az.ess(v, method="tail", prob=(0.05, 0.95)))) for v in hyper.values())
             rhat = max(float(np.nanmax(az.rhat(v))) for v in hyper.values())
@@ -335,6 +426,7 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
             if min(ess_b, ess_t) >= ess_target and rhat <= rhat_max:
                 converged = True
                 break
+            next_check = sweeps + max(check_every, int(0.1 * n))
     n = sweeps - burn
     out = {k: np.stack(v, axis=1) for k, v in draws.items()}  # (C, n, ...)
     thin = max(1, math.ceil(n / keep))
@@ -342,7 +434,7 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     out.update(_hyper_draws(out.pop("mu"), out.pop("Sigma"), spec))
     out.update(converged=converged, sweeps=sweeps, burn=burn, thin=thin, checks=checks,
                acceptance=(accept / max(n, 1)).tolist(),
-               scale_acceptance=(scale_total / scale_n) if scale_n else None)
+               scale_acceptance=shift.acceptance())
     return out
 
 
@@ -402,20 +494,97 @@ def _hyper_step(u, mu, Sigma, a, w, spec, rng):
     return mu, Sigma, a, w
 
 
-def _scale_move(subs, z, ll, theta, u, mu, Sigma, a, spec, step, rng):
-    """Joint Metropolis move of the population sds and every subject along the non-centred
-    coordinates: sd' = sd e^eps, u' = mu + (sd'/sd)(u - mu), other slots fixed.  In the
-    coordinates (mu, var, u, other z): N(u'; mu, var') / N(u; mu, var) = e^-eps per subject and
-    parameter and the map (var, u) -> (var', u') has Jacobian e^(2 eps + S eps), so the ratio is
-    likelihood ratio x p(var' | a) / p(var | a) x e^(2 eps).  Returns (accepted (C,), z, ll,
-    Sigma, theta)."""
+class _ShiftMoves:
+    """Blocks of :func:`_shift_move` per sweep and their step sizes.  ``kind``: ``"each"`` (one
+    move of location and scale per weak parameter), ``"joint"`` (one move of all of them),
+    ``"none"``.  Steps: per parameter, the sd of ``mu`` and of ``log sd`` over the second
+    quarter of the burn-in, times a factor per block tuned towards 25% acceptance in the
+    burn-in (then fixed, so the kernel is fixed after the burn-in)."""
+
+    def __init__(self, kind, weak, loc0, spec):
+        self.kind, self.spec = kind, spec
+        self.loc, self.scale = loc0.copy(), np.full(spec.p, 0.3)
+        self.hist = []
+        self._blocks(weak)
+
+    def _blocks(self, weak):
+        idx = np.flatnonzero(weak)
+        if self.kind == "none" or not len(idx):
+            self.blocks = []
+        elif self.kind == "each":
+            self.blocks = [np.array([j]) for j in idx]
+        else:
+            self.blocks = [idx]
+        self.factor = [2.38 / math.sqrt(2 * len(b)) for b in self.blocks]
+        self.n = [0] * len(self.blocks)
+        self.acc = [0.0] * len(self.blocks)
+        self.total = [[0.0, 0] for _ in self.blocks]
+
+    def steps(self, C, rng):
+        p = self.spec.p
+        for b, f in zip(self.blocks, self.factor):
+            d, eps = np.zeros((C, p)), np.zeros((C, p))
+            d[:, b] = f * self.loc[b] * rng.standard_normal((C, len(b)))
+            eps[:, b] = f * self.scale[b] * rng.standard_normal((C, len(b)))
+            yield d, eps
+
+    def record(self, k, took, after_burn):
+        self.n[k] += 1
+        self.acc[k] += took.mean()
+        if after_burn:
+            self.total[k][0] += took.mean()
+            self.total[k][1] += 1
+
+    def adapt(self, sweep, burn, mu, Sigma, within):
+        self.hist.append((mu.copy(), 0.5 * np.log(np.diagonal(Sigma, axis1=1, axis2=2))))
+        if sweep == burn // 2:  # weak parameters and steps from the burn-in so far
+            m = np.concatenate([h[0] for h in self.hist[burn // 4:]])
+            ls = np.concatenate([h[1] for h in self.hist[burn // 4:]])
+            self.loc, self.scale = m.std(axis=0) + 1e-12, ls.std(axis=0) + 1e-3
+            self._blocks(within > 0.25 * np.median(np.exp(2 * ls), axis=0))
+        else:
+            for k in range(len(self.blocks)):
+                if self.n[k] == 20:  # towards 25% acceptance
+                    self.factor[k] *= math.exp(self.acc[k] / self.n[k] - 0.25)
+                    self.n[k], self.acc[k] = 0, 0.0
+
+    def acceptance(self):
+        rates = [t / n for t, n in self.total if n]
+        return float(np.mean(rates)) if rates else None
+
+
+def _shift_move(subs, z, ll, theta, u, mu, Sigma, a, spec, d, eps, rng):
+    """Joint Metropolis move of the hyper-parameters and every subject along the non-centred
+    coordinates ``eta = D^-1 (u - mu)`` (held fixed): ``mu' = mu + d``, ``sd' = sd e^eps``
+    (``Sigma' = D Sigma D``, ``D = diag(e^eps)``), ``u' = mu' + D (u - mu)``, the other slots
+    fixed in their z coordinates (a separable sampling map).  ``d``, ``eps`` (C, p): symmetric
+    random steps (zero for the parameters not moved).  In the coordinates (mu, Sigma, u, other
+    z) the population density ratio is ``|D|^-S`` and the map's Jacobian ``|D|^(S + p + 1)``
+    (``|D|^S`` from the subjects, ``prod_i<=j e^(eps_i + eps_j)`` from Sigma's entries; for an
+    independent population each variance alone gives ``e^(2 eps_j)``), so the ratio is
+    likelihood ratio x hyper-prior ratio (mu normal; Sigma | a inverse-Wishart, variance | a
+    inverse-gamma) x ``|D|^(p + 1)`` (correlated) or ``e^(2 sum eps)`` (independent).
+    Returns (accepted (C,), z, ll, mu, Sigma, theta)."""
     C, S, p = u.shape
-    var = np.diagonal(Sigma, axis1=1, axis2=2)
-    eps = step * rng.standard_normal((C, p))
-    u_new = mu[:, None] + np.exp(eps)[:, None] * (u - mu[:, None])
-    v_new = var * np.exp(2 * eps)
+    g = np.exp(eps)
+    mu_new = mu + d
+    u_new = mu_new[:, None] + g[:, None] * (u - mu[:, None])
+    Sigma_new = Sigma * g[:, :, None] * g[:, None, :]
     nu = NU_HYPER
-    lp = lambda v: (-(0.5 * nu + 1) * np.log(v) - nu / (a * v)).sum(axis=1)  # noqa: E731  InvGamma(nu/2, nu/a)
+    prior_mu = lambda m: -0.5 * (((m - spec.centre) / (2 * spec.scale)) ** 2).sum(axis=1)  # noqa: E731
+    if spec.correlated:
+        df = nu + p - 1
+        psi = 2 * nu / a  # the diagonal of the inverse-Wishart scale
+
+        def lp_sigma(Sg):
+            _, logdet = np.linalg.slogdet(Sg)
+            return -0.5 * (df + p + 1) * logdet - 0.5 * (psi * np.diagonal(np.linalg.inv(Sg), axis1=1, axis2=2)).sum(1)
+        log_jac = (p + 1) * eps.sum(axis=1)
+    else:
+        def lp_sigma(Sg):  # InvGamma(nu/2, nu/a) per variance
+            v = np.diagonal(Sg, axis1=1, axis2=2)
+            return (-(0.5 * nu + 1) * np.log(v) - nu / (a * v)).sum(axis=1)
+        log_jac = 2 * eps.sum(axis=1)
     th = theta.copy()
     with np.errstate(over="ignore"):
         th[..., spec.index] = np.where(spec.log, np.exp(np.clip(u_new, -700, 700)), u_new)
@@ -423,11 +592,13 @@ def _scale_move(subs, z, ll, theta, u, mu, Sigma, a, spec, step, rng):
     th, _ = subs.transform(z_new)
     ok = np.all(np.isfinite(z_new), axis=-1)[..., None]
     ll_new = subs.log_likelihood(np.where(ok, th, np.nan))
-    log_r = lp(v_new) - lp(var) + 2 * eps.sum(axis=1) + (ll_new - ll).sum(axis=1)
+    with np.errstate(invalid="ignore"):
+        log_r = (prior_mu(mu_new) - prior_mu(mu) + lp_sigma(Sigma_new) - lp_sigma(Sigma) + log_jac
+                 + (ll_new - ll).sum(axis=1))
     take = np.log(rng.random(C)) < np.where(np.isfinite(log_r), log_r, -np.inf)
     z = np.where(take[:, None, None], z_new, z)
     ll = np.where(take[:, None], ll_new, ll)
     theta = np.where(take[:, None, None], th, theta)
-    var = np.where(take[:, None], v_new, var)
-    Sigma = var[..., :, None] * np.eye(p)
-    return take, z, ll, Sigma, theta
+    mu = np.where(take[:, None], mu_new, mu)
+    Sigma = np.where(take[:, None, None], Sigma_new, Sigma)
+    return take, z, ll, mu, Sigma, theta

@@ -128,3 +128,73 @@ def run_sbc(family, n_sims, seed, *, n_subjects=8, presses=2, ess_target=100, rh
     pvalues = {k: float(stats.chisquare(np.bincount(np.asarray(v) // 10, minlength=10)).pvalue)
                for k, v in ranks.items()}
     return ranks, pvalues
+
+
+def quadrature(fits, family="lognormal", n_u=1500, n_sigma=100, n_m=160, n_tau=160):
+    """The population posterior of the Coulomb friction coefficient by quadrature, an
+    independent reference for the sampler (no Markov chain, no proposal): each subject's
+    likelihood of ``u`` (log mu for the log-normal family, else mu) summed over its noise
+    scale on a grid under its prior (the other slots do not enter the 0 V likelihood), then
+    ``(m, tau)`` on a grid under the hyper-prior (``tau`` log-spaced from 1e-3 s), and each
+    subject's shrunk posterior of ``u`` mixed over that grid.
+
+    Returns dict: ``m``, ``tau`` (posterior mean, sd) and ``subjects`` {label: function
+    q -> quantile of the subject's mu}."""
+    from scipy import stats
+
+    c, s = hyperprior(family)
+    labels = list(fits)
+    posts = [fits[k].posterior for k in labels]
+    names = posts[0].names
+    j_mu, j_sig = names.index("mu"), names.index("sigma")
+    draws = [np.asarray(fits[k].group("posterior")["mu"]).ravel() for k in labels]
+    prior_mu = load_priors(MODEL)["mu"]
+    lo_u, hi_u = (np.log(prior_mu.lower + 1e-12), np.log(prior_mu.upper)) if family == "lognormal" \
+        else (prior_mu.lower, prior_mu.upper)
+    ud = [np.log(d) if family == "lognormal" else d for d in draws]
+    a, b = min(np.quantile(x, 0.0005) for x in ud), max(np.quantile(x, 0.9995) for x in ud)
+    a, b = max(a - 0.3 * (b - a), lo_u), min(b + 0.3 * (b - a), hi_u)
+    u = np.linspace(a, b, n_u)
+    mu = np.exp(u) if family == "lognormal" else u
+    logL = np.empty((len(posts), n_u))
+    for i, post in enumerate(posts):
+        sig_draws = np.asarray(fits[labels[i]].group("posterior")["sigma"]).ravel()
+        ls = np.linspace(np.log(sig_draws.min()) - 1.5, np.log(sig_draws.max()) + 1.5, n_sigma)
+        base = np.array([sl.prior.ppf(0.5) for sl in post.slots])
+        theta = np.tile(base, (n_u * n_sigma, 1))
+        theta[:, j_mu] = np.repeat(mu, n_sigma)
+        theta[:, j_sig] = np.tile(np.exp(ls), n_u)
+        ll = post.log_likelihood(theta).reshape(n_u, n_sigma)
+        ll += post.slots[j_sig].prior.logpdf(np.exp(ls)) + ls  # prior of sigma, d sigma = sigma d log sigma
+        m_ = ll.max()
+        logL[i] = m_ + np.log(np.exp(ll - m_).sum(axis=1) * (ls[1] - ls[0]))
+    L = np.exp(logL - logL.max(axis=1, keepdims=True))
+    du = u[1] - u[0]
+    sd_u = max(np.std(np.concatenate(ud)), 1e-3)
+    m_grid = np.linspace(u.min() - 0.5 * sd_u, u.max() + 0.5 * sd_u, n_m)
+    log_tau = np.linspace(np.log(1e-3 * s), np.log(5 * s), n_tau)
+    tau = np.exp(log_tau)
+    log_post = np.empty((n_tau, n_m))
+    Z = np.empty((n_tau, n_m, len(posts)))
+    for t, tv in enumerate(tau):
+        N = stats.norm.pdf(u[None, :], m_grid[:, None], tv) * du  # (n_m, n_u)
+        Z[t] = N @ L.T
+        with np.errstate(divide="ignore"):
+            log_post[t] = np.log(Z[t]).sum(axis=1)
+    log_post += stats.norm.logpdf(m_grid, c, 2 * s)[None] + stats.t.logpdf(tau / s, NU_HYPER)[:, None] + log_tau[:, None]
+    w = np.exp(log_post - log_post.max())
+    w /= w.sum()
+    mm = (w.sum(axis=0) * m_grid).sum()
+    tm = (w.sum(axis=1) * tau).sum()
+    out = {"m": (mm, np.sqrt((w.sum(axis=0) * (m_grid - mm) ** 2).sum())),
+           "tau": (tm, np.sqrt((w.sum(axis=1) * (tau - tm) ** 2).sum()))}
+    dens = np.zeros((len(posts), n_u))
+    for t, tv in enumerate(tau):
+        N = stats.norm.pdf(u[None, :], m_grid[:, None], tv) * du
+        ratio = np.divide(w[t][:, None], Z[t], out=np.zeros_like(Z[t]), where=w[t][:, None] > 0)
+        dens += ratio.T @ N  # (S, n_u): sum over m of w / Z_i N(u; m, tau)
+    dens *= L
+    cdf = np.cumsum(dens, axis=1)
+    cdf /= cdf[:, -1:]
+    out["subjects"] = {k: (lambda q, c_=cdf[i]: float(np.interp(q, c_, mu))) for i, k in enumerate(labels)}
+    return out
