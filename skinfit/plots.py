@@ -554,8 +554,9 @@ def plot_ppc(fit, path=None):
     multi = len(observables) > 1 or pair is not None
     multi_colour = n_colours > 1
     palette = _palette(fit, spec["colours"], n_colours)
-    # overlapping bands of several colour levels: one panel per (panel, colour) level instead
-    split = multi_colour and not multi and _bands_overlap(bands, observables[0], panel, n_colours)
+    # overlapping bands of several colour levels (of any observable): one panel per (panel,
+    # colour) level instead
+    split = multi_colour and any(_bands_overlap(bands, o, panel, n_colours) for o in observables)
     if split:
         cells = [(p, c) for p in range(len(panel_labels)) for c in range(n_colours)
                  if np.any((panel == p) & (colour == c))]
@@ -629,7 +630,7 @@ def plot_ppc(fit, path=None):
             if title and (r == 0 or len(observables) == 1):
                 ax.set_title(_wrap(title, ax), fontsize=MIN_FONT + 1)
     if pair:
-        _draw_pair_row(fit, rows[-1], pair, spec, units, panel, colour, curves, palette)
+        _draw_pair_row(fit, rows[-1], cells, pair, spec, units, panel, colour, curves, palette)
     for row in rows:
         for ax in row:
             ax.grid(alpha=0.25, lw=0.5)
@@ -696,14 +697,15 @@ def _wrap(text, ax, fontsize=MIN_FONT + 1):
     return "\n".join(w for line in text.split("\n") for w in textwrap.wrap(line, per_line))
 
 
-def _draw_pair_row(fit, axes, pair, spec, units, panel, colour, curves, palette):
-    """One observable against the other: data, joint predictive draws, median curve."""
+def _draw_pair_row(fit, axes, cells, pair, spec, units, panel, colour, curves, palette):
+    """One observable against the other, an axes per (panel, colour level or None for all)
+    cell: data, joint predictive draws, median curve."""
     xo, yo = pair
     od = fit.group("observed_data")
     fx, fy = _factor(units.get(xo)), _factor(units.get(yo))
     px, py = _ppc_draws(fit, xo, 20), _ppc_draws(fit, yo, 20)
-    for p, ax in enumerate(axes):
-        for c in range(len(palette)):
+    for ax, (p, only) in zip(axes, cells):
+        for c in range(len(palette)) if only is None else [only]:
             idx = np.flatnonzero((panel == p) & (colour == c))
             if not len(idx):
                 continue
