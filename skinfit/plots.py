@@ -529,8 +529,8 @@ def plot_ppc(fit, path=None):
     else varies within the panel, else markers at the observed x; for models with two
     observables, one row per observable plus a row of one observable against the other;
     the wavy-surface ball-bearing curve (eq. 2) for reference when the data allow it.
-    Levels of a colour column get one colour each (Okabe-Ito) and, when their bands overlap,
-    one panel each. Axes are in the units the data came in.
+    Levels of a colour column get one colour each (Okabe-Ito or viridis) and, when their bands
+    overlap, one panel each (up to 12 panels; for two observables a row or column each). Axes are in the units the data came in.
 
     Returns the matplotlib Figure (written to ``path`` when given).
     """
@@ -555,12 +555,11 @@ def plot_ppc(fit, path=None):
     multi_colour = n_colours > 1
     palette = _palette(fit, spec["colours"], n_colours)
     # overlapping bands of several colour levels (of any observable): one panel per (panel,
-    # colour) level instead
-    split = multi_colour and any(_bands_overlap(bands, o, panel, n_colours) for o in observables)
-    if split:
-        cells = [(p, c) for p in range(len(panel_labels)) for c in range(n_colours)
-                 if np.any((panel == p) & (colour == c))]
-    else:
+    # colour) level instead, when that makes at most _MAX_PANELS panels
+    cells = [(p, c) for p in range(len(panel_labels)) for c in range(n_colours) if np.any((panel == p) & (colour == c))]
+    split = (multi_colour and len(cells) <= _MAX_PANELS
+             and any(_bands_overlap(bands, o, panel, n_colours) for o in observables))
+    if not split:
         cells = [(p, None) for p in range(len(panel_labels))]
     n_panels = len(cells)
     transpose = False
