@@ -104,10 +104,12 @@ _SUMMARIES = weakref.WeakKeyDictionary()  # Fit -> its summary table (see fit_su
 def fit_summary(fit):
     """:meth:`Fit.summary` computed once per Fit object: the report's tables and several
     figures read it, and each call costs ~0.2-0.5 s (ESS and R-hat of every parameter). The
-    table depends on the posterior and attributes only, which a Fit never changes."""
-    if fit not in _SUMMARIES:
-        _SUMMARIES[fit] = fit.summary()
-    return _SUMMARIES[fit].copy()  # a caller may add columns to its copy
+    table depends on the posterior and attributes only, which change only when
+    :meth:`Fit.complete` adds its model-fit warnings (then it is computed again)."""
+    key = (getattr(fit, "pending", False), len(fit.warnings))
+    if fit not in _SUMMARIES or _SUMMARIES[fit][0] != key:
+        _SUMMARIES[fit] = (key, fit.summary())
+    return _SUMMARIES[fit][1].copy()  # a caller may add columns to its copy
 
 
 def _data_units(fit):
