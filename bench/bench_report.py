@@ -1,12 +1,21 @@
 """Wall times of reports and of the whole demo, as whole processes (``skinfit ...``).
 
     .venv/bin/python bench/bench_report.py [--work /tmp/skinfit-bench-report] [--skip-fresh]
+    .venv/bin/python bench/bench_report.py --report-only [--work DIR] [--profile FILE]
 
 Rows: the whole ``skinfit demo`` from nothing (28 fits: 15 compared + 12 more contact_area
 subjects, the 13-subject population, contrasts, report); the demo again with every fit reused
 and the report's figure cache emptied (every figure drawn, in parallel processes); the demo
 again with fits and figures reused; ``skinfit report`` of one fit (its figures new). Written
 to bench/results/report.md with the machine and its load.
+
+``--report-only`` times :func:`skinfit.report.write_report` alone, in this process, on the
+demo's saved fits (made once under ``--work`` when absent, not timed): the demo is run with
+every fit reused and its ``write_report`` call timed (wall, CPU of this process and of the
+figure workers), into a new report folder (every figure drawn) and again into the same
+folder (every figure reused); then ``skinfit report`` of one electroadhesion fit, as a whole
+process, figures drawn and reused. ``--profile FILE`` writes a cProfile of the first
+write_report (one figure worker, so that the figures are in the profile).
 """
 
 import argparse
@@ -33,13 +42,84 @@ def timed(args, log):
     return wall, subprocess.run(["uptime"], capture_output=True, text=True).stdout.split("load average:")[-1].strip()
 
 
+def _report_only(work, profile):
+    """Rows (what, target, wall s, CPU text, load) of write_report on the demo's fits."""
+    import resource
+
+    import skinfit.report as report
+    from skinfit.demo import run_demo
+
+    runs = work / "runs"
+    if not (runs / "electroadhesion_synthetic" / "electroadhesion" / "fit.nc").exists():
+        timed(["demo", "--out", str(runs), "--report", str(work / "first_report")], work / "fits.log")
+    real = report.write_report
+    times = []
+
+    def timed_write(*args, **kwargs):
+        c0, w0 = time.process_time(), time.perf_counter()
+        k0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if profile and not times:
+            import cProfile
+
+            workers, report.MAX_FIGURE_WORKERS = report.MAX_FIGURE_WORKERS, 1
+            prof = cProfile.Profile()
+            try:
+                out = prof.runcall(real, *args, **kwargs)
+            finally:
+                report.MAX_FIGURE_WORKERS = workers
+            prof.dump_stats(profile)
+        else:
+            out = real(*args, **kwargs)
+        k1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        times.append((time.perf_counter() - w0, time.process_time() - c0,
+                      k1.ru_utime + k1.ru_stime - k0.ru_utime - k0.ru_stime))
+        return out
+
+    report.write_report = timed_write
+    rep = work / "report"
+    rows = []
+    try:
+        for what, target in (("write_report of the demo (27 fits), fits reused, every figure drawn", "< 20 s"),
+                             ("the same again, every figure reused", "")):
+            if not times:
+                shutil.rmtree(rep, ignore_errors=True)
+            run_demo(runs, rep, echo=lambda *a: None)
+            wall, cpu, children = times[-1]
+            load = subprocess.run(["uptime"], capture_output=True, text=True).stdout.split("load average:")[-1]
+            rows.append((what, target, wall, f"{cpu:.1f} + {children:.1f} workers", load.strip()))
+    finally:
+        report.write_report = real
+    one = runs / "electroadhesion_synthetic" / "electroadhesion"
+    shutil.rmtree(work / "one", ignore_errors=True)
+    for what, target in (("`skinfit report` of one fit (electroadhesion), figures drawn, whole process", "< 3 s"),
+                         ("the same again, figures reused", "")):
+        wall, load = timed(["report", str(one), "--out", str(work / "one")], work / "one.log")
+        rows.append((what, target, wall, "", load))
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser()
+    ap.add_argument("--report-only", action="store_true", help="time write_report alone (see the module text)")
+    ap.add_argument("--profile", help="with --report-only: cProfile of the first write_report, one worker")
     ap.add_argument("--work", default="/tmp/skinfit-bench-report")
     ap.add_argument("--skip-fresh", action="store_true", help="reuse the fits already under --work")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "report.md"))
     args = ap.parse_args()
     work = Path(args.work)
+    if args.report_only:
+        work.mkdir(parents=True, exist_ok=True)
+        rows = _report_only(work, args.profile)
+        stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        lines = ["# The report alone: write_report on the demo's saved fits, and a one-fit report", "",
+                 f"`.venv/bin/python bench/bench_report.py --report-only` - {stamp}", "",
+                 machine_text(machine_info()), "",
+                 "| what | target | wall s | CPU s (this process + figure workers) | load average after |",
+                 "|---|---|---|---|---|"]
+        lines += [f"| {w} | {t} | {wall:.1f} | {cpu} | {load} |" for w, t, wall, cpu, load in rows]
+        Path(args.out).write_text("\n".join(lines) + "\n")
+        print("\n".join(lines))
+        return
     if not args.skip_fresh:
         shutil.rmtree(work, ignore_errors=True)
     runs, rep = work / "runs", work / "report"

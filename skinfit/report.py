@@ -121,7 +121,7 @@ def fit_diagnostics(fit, summary=None):
     a list of ``(status, message)`` for every WARN and FAIL.
     """
     fit = plots._as_fit(fit)
-    summary = fit.summary() if summary is None else summary
+    summary = plots.fit_summary(fit) if summary is None else summary
     s = fit.attr("sampler")
     c = fit.attr("support_counts")
     t = fit.attr("timings")
@@ -263,7 +263,10 @@ def _figure(make, path):
 MANY_FITS = 4
 #: Processes that draw a report's figures (at most; one per core).
 MAX_FIGURE_WORKERS = 4
-_FITS = []  # the fits being drawn, inherited by forked worker processes
+#: Rough relative cost of each figure kind: the costliest are started first, so that the
+#: workers finish together.
+_COST = {"plot_ppc": 4, "plot_trace": 3, "plot_prior_posterior": 2, "plot_pair": 2, "plot_forest": 1}
+_FITS, _JOBS = [], []  # the fits and figure jobs being drawn, inherited by forked worker processes
 
 
 def fit_hash(fit):
@@ -295,23 +298,40 @@ def _settings_hash():
     return hashlib.sha256(Path(plots.__file__).read_bytes() + Path(__file__).read_bytes()).hexdigest()[:16]
 
 
-def _render_one(job):
-    """Draw one figure job into its PNG and PDF (top level: runs in a forked worker)."""
-    fit = _FITS[job["fit"]]
-    return _figure(lambda: getattr(plots, job["func"])(fit, *job["args"]), job["path"])
+def _job_fits(job):
+    """The first argument of a job's plot function: one fit, or {label: fit} across fits."""
+    if isinstance(job["fit"], dict):
+        return {label: _FITS[i] for label, i in job["fit"].items()}
+    return _FITS[job["fit"]]
+
+
+def _render_one(i):
+    """Draw figure job ``i`` of :data:`_JOBS` into its PNG and PDF (top level: runs in a forked
+    worker, which inherits the fits and jobs, so nothing is pickled but the index)."""
+    job = _JOBS[i]
+    return _figure(lambda: getattr(plots, job["func"])(_job_fits(job), *job["args"], **job.get("kwargs", {})),
+                   job["path"])
+
+
+def _init_worker(parent):
+    """A figure worker ends when the report process that forked it dies (even by SIGKILL)."""
+    from .campaign import _watch_parent
+
+    _watch_parent(parent)
 
 
 def render_figures(fits, jobs, figdir):
-    """Draw figure ``jobs`` ({fit: index into fits, func: plots function name, args, path}),
-    each once per input: a figure whose fit content (:func:`fit_hash`), function, arguments
-    and plotting code are those recorded in ``figdir/.figures.json`` beside an existing file
-    is kept. The rest are drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this
-    one where fork is unavailable). Returns one error text or None per job."""
+    """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits;
+    func: plots function name; args; optional kwargs; path}), each once per input: a figure
+    whose fits' content (:func:`fit_hash`), function, arguments and plotting code are those
+    recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
+    drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
+    unavailable), costliest first. Returns one error text or None per job."""
     import multiprocessing
     import os
     from concurrent.futures import ProcessPoolExecutor
 
-    global _FITS
+    global _FITS, _JOBS
     manifest_path = figdir / ".figures.json"
     try:
         manifest = json.loads(manifest_path.read_text())
@@ -319,29 +339,43 @@ def render_figures(fits, jobs, figdir):
         manifest = {}
     settings = _settings_hash()
     hashes = {}
+
+    def content(i):
+        if i not in hashes:
+            hashes[i] = fit_hash(fits[i])
+        return hashes[i]
+
     keys = []
     for job in jobs:
-        if job["fit"] not in hashes:
-            hashes[job["fit"]] = fit_hash(fits[job["fit"]])
-        keys.append(f"{hashes[job['fit']]}:{job['func']}:{json.dumps(job['args'])}:{settings}")
+        which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
+        inputs = ",".join(f"{label}={content(i)}" for label, i in which)
+        keys.append(f"{inputs}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
+                    f"{settings}")
     todo = [i for i, (job, key) in enumerate(zip(jobs, keys))
             if manifest.get(job["path"].name) != key or not job["path"].exists()
             or not job["path"].with_suffix(".pdf").exists()]
+    todo.sort(key=lambda i: -_COST.get(jobs[i]["func"], 1))  # stable: the report's order within a kind
     errors = [None] * len(jobs)
-    _FITS = fits
+    _FITS, _JOBS = fits, jobs
     workers = min(MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            for fit in fits:  # each worker draws from the complete tree, computed once here
-                fit.complete()
-            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
-                for i, error in zip(todo, pool.map(_render_one, [jobs[i] for i in todo])):
+            for i in {i for j in todo for i in (jobs[j]["fit"].values() if isinstance(jobs[j]["fit"], dict)
+                                                 else [jobs[j]["fit"]])}:
+                fits[i].complete()  # each worker draws from the complete tree, computed once here
+                plots.fit_summary(fits[i])  # and from its summary, inherited
+            import matplotlib.backends.backend_pdf  # noqa: F401  imported once, before the fork
+            import PIL.PngImagePlugin  # noqa: F401
+
+            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
+                                     initializer=_init_worker, initargs=(os.getpid(),)) as pool:
+                for i, error in zip(todo, pool.map(_render_one, todo)):
                     errors[i] = error
         else:
             for i in todo:
-                errors[i] = _render_one(jobs[i])
+                errors[i] = _render_one(i)
     finally:
-        _FITS = []
+        _FITS, _JOBS = [], []
     for i in todo:
         if errors[i] is None:
             manifest[jobs[i]["path"].name] = keys[i]
@@ -352,17 +386,22 @@ def render_figures(fits, jobs, figdir):
 
 
 def _write_png(fig, path):
-    """PNG quantised to 256 colours: a third of the size, no visible change for line art."""
-    import io
-
+    """The figure as a PNG quantised to 256 colours (a third of the size, no visible change for
+    line art) and as a vector PDF (dense scatter rasterised), for papers. The PNG is drawn
+    once into Agg's buffer (no PNG encoded and decoded on the way); the PDF keeps the layout
+    that drawing computed rather than running constrained layout again."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image
 
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=plots._DPI)
-    image = Image.open(io.BytesIO(buffer.getvalue())).convert("RGB")
+    fig.set_dpi(plots._DPI)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    image = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
     image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
-        path, format="PNG", optimize=True)
-    fig.savefig(Path(path).with_suffix(".pdf"))  # vector (dense scatter rasterised), for papers
+        path, format="PNG", compress_level=6)
+    fig.set_layout_engine("none")
+    fig.savefig(Path(path).with_suffix(".pdf"))
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
@@ -414,7 +453,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items], number_identical=False)))
     for key, fit in items:
         fit.complete()  # its predictive checks need the deferred groups; the diagnostics then give their time
-        summary = fit.summary()
+        summary = plots.fit_summary(fit)
         diag, issues = fit_diagnostics(fit, summary)
         summary.to_csv(out / f"{key}_summary.csv")
         diag.to_csv(out / f"{key}_diagnostics.csv")
@@ -447,13 +486,19 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
                          "diagnostics": _table(diag, "check"), "figures": figures,
                          "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
 
+    across = _across_fits(items, figdir, population, populations or {}, out, jobs)
     for job, error in zip(jobs, render_figures([fit for _, fit in items], jobs, figdir)):
-        if error:  # listed at the top and in its section, the figure left out
+        if not error:
+            continue
+        if "across" in job:  # listed at the top, the figure left out
+            job["across"]["figures"].remove(job["entry"])
+            issues_all.append({"status": "WARN", "fit": "", "where": f"{job['across']['model_id']} across fits",
+                               "text": error})
+        else:  # listed at the top and in its section, the figure left out
             section = sections[job["fit"]]
             section["figures"].remove(job["entry"])
             section["issues"].append(("WARN", error))
             issues_all.append({"status": "WARN", "fit": section["key"], "where": section["where"], "text": error})
-    across = _across_fits(items, figdir, population, issues_all, populations or {}, out)
     contrast_tables = []
     for name, table in (contrasts or {}).items():
         from .report_groups import contrast_section
@@ -541,13 +586,15 @@ def _split_parameters(fit):
             if set(post[v].dims) - {"chain", "draw"}}
 
 
-def _across_fits(items, figdir, population, issues, populations, out_dir):
+def _across_fits(items, figdir, population, populations, out_dir, jobs):
     """Per model with several fits (subjects, conditions): a table and a forest plot of each
     parameter across the fits, labelled by subject as written in the data, and the model's
-    population result when given."""
+    population result when given. The forest plots are appended to ``jobs`` (drawn with the
+    fits' own figures by :func:`render_figures`)."""
     from .report_groups import population_section, subjects_section
 
     by_model = {}
+    index = {key: i for i, (key, _) in enumerate(items)}
     for key, fit in items:
         by_model.setdefault(fit.model_id, []).append((key, fit))
     out = []
@@ -583,23 +630,21 @@ def _across_fits(items, figdir, population, issues, populations, out_dir):
         else:
             pop_tables = None
         figures = []
+        entry = {"model_id": model_id, "fits": list(labelled), "figures": figures, "tables": tables,
+                 "population": pop_tables}
+        labels = {label: index[k] for label, (k, _) in zip(labelled, group)}
         for pname in group[0][1].group("posterior").data_vars:
             path = figdir / f"across_{safe}_{pname}.png"
             pop = _population_for(population, model_id, pname)
             if pop is None and pop_info is not None:
                 pop = pop_info["intervals"].get(pname)
-            fits = labelled
-            error = _figure(lambda pname=pname, pop=pop, fits=fits: plots.plot_forest(fits, pname, population=pop),
-                            path)
-            if error:
-                issues.append({"status": "WARN", "fit": "", "where": f"{model_id} across fits", "text": error})
-                continue
             caption = f"{pname} across {len(group)} fits" + (" with the population distribution" if pop is not None
                                                               else "")
             figures.append({"file": f"figures/{path.name}", "caption": caption,
                             "alt": f"forest plot of {pname} across the fits of {model_id}"})
-        out.append({"model_id": model_id, "fits": list(labelled), "figures": figures, "tables": tables,
-                    "population": pop_tables})
+            jobs.append({"fit": labels, "func": "plot_forest", "args": (pname,), "kwargs": {"population": pop},
+                         "path": path, "entry": figures[-1], "across": entry})
+        out.append(entry)
     return out
 
 

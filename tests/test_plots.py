@@ -439,3 +439,31 @@ def test_overlapping_colour_levels_get_a_panel_each(fits):
         assert len([c for c in ax.collections if c.get_gid() == "band90"]) == 1
         (data,) = [c for c in ax.collections if c.get_gid() == "data"]
         assert len({tuple(np.round(fc, 3)) for fc in data.get_facecolors()}) == 1
+
+
+def test_two_observables_with_overlapping_levels_get_a_panel_per_level(tmp_path):
+    """contact_area of one subject: 7 actuation forces whose bands overlap get a row of panels
+    each (both observables and the pair), one colour-blind-safe colour per level, laid out
+    within the rules."""
+    ds = skinfit.load_dataset("contact_area_synthetic")
+    one = ds.subset(ds.frame["subject"].astype(str).to_numpy() == "S01", "subject=S01")
+    fit = _short_fit("contact_area", one, rng=SEED)
+    bands = plots.ppc_bands(fit)
+    levels = bands.attrs["colour_labels"]
+    assert len(levels) == 7  # actuation forces 0-30 N
+    panel = bands[bands["observable"] == "contact_area"]["panel"].to_numpy()
+    assert any(plots._bands_overlap(bands, o, panel, len(levels)) for o in ("contact_area", "impedance"))
+    fig = plots.plot_ppc(fit, tmp_path / "ppc.png")
+    _written(tmp_path / "ppc.png")
+    banded = [a for a in fig.axes if any(c.get_gid() == "band90" for c in a.collections)]
+    assert len(banded) == 2 * len(levels)  # one panel per level and observable
+    colours = []
+    for ax in banded:
+        assert len([c for c in ax.collections if c.get_gid() == "band90"]) == 1
+        (data,) = [c for c in ax.collections if c.get_gid() == "data"]
+        (colour,) = {tuple(np.round(fc, 3)) for fc in data.get_facecolors()}
+        colours.append(colour)
+    assert len(set(colours)) == len(levels)  # one colour per level, the same for both observables
+    titles = [a.get_title() for a in fig.axes if a.get_title()]
+    assert len(titles) == len(levels) and all(lab in t for lab, t in zip(levels, titles))
+    assert not layout_problems(fig)

@@ -2,6 +2,7 @@
 table in it holds the saved fits' numbers."""
 
 import math
+import os
 import re
 import warnings
 from html.parser import HTMLParser
@@ -213,3 +214,61 @@ def test_cli_report_from_run_directories(rival, tmp_path, capsys):
     assert any("across_electroadhesion_coulomb_mu" in link for link in page.links)
     assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep2")]) == 2
     assert "no such run directory" in capsys.readouterr().err
+
+
+_KILLED_REPORT = """
+import os, sys, time
+from pathlib import Path
+from skinfit import plots, report
+from skinfit.fit import load_fit
+
+os.cpu_count = lambda: 2  # two figure workers even on a one-core machine
+
+def stuck(fit, *args, **kwargs):  # a figure that takes far longer than the test waits
+    Path(sys.argv[2], f"worker-{os.getpid()}").write_text("")
+    time.sleep(120)
+
+plots.plot_ppc = plots.plot_trace = stuck
+report.write_report(load_fit(sys.argv[1]), sys.argv[3])
+"""
+
+
+def _alive(pid):
+    """Running (a zombie left unreaped by an init that does not reap counts as ended)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in ("Z", "X")
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir() or "fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork and /proc (Linux) to find the figure workers")
+def test_figure_workers_end_when_the_report_process_is_killed(ea_fit, tmp_path):
+    """kill -9 of a report process mid-drawing: its forked figure workers end within seconds
+    rather than drawing on as orphans."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    ea_fit.save(tmp_path / "fit.nc")
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED_REPORT, str(tmp_path / "fit.nc"), str(marks),
+                             str(tmp_path / "report")])
+    deadline = time.monotonic() + 120
+    while len(list(marks.iterdir())) < 2 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    workers = [int(p.name.split("-")[1]) for p in marks.iterdir()]
+    assert len(workers) == 2, f"two workers should be drawing (report exited {proc.poll()})"
+    assert all(_alive(pid) for pid in workers)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 5
+    while any(_alive(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    survivors = [pid for pid in workers if _alive(pid)]
+    for pid in survivors:  # leave nothing behind, then fail
+        os.kill(pid, signal.SIGKILL)
+    assert not survivors, f"figure workers {survivors} outlived their report process"
