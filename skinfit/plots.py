@@ -34,7 +34,6 @@ import os
 import re
 import tomllib
 import warnings
-import weakref
 from pathlib import Path
 
 import matplotlib
@@ -96,20 +95,6 @@ def _as_fit(obj):
 
 def _card(fit):
     return tomllib.loads(fit.attrs["model_card"])
-
-
-_SUMMARIES = weakref.WeakKeyDictionary()  # Fit -> its summary table (see fit_summary)
-
-
-def fit_summary(fit):
-    """:meth:`Fit.summary` computed once per Fit object: the report's tables and several
-    figures read it, and each call costs ~0.2-0.5 s (ESS and R-hat of every parameter). The
-    table depends on the posterior and attributes only, which change only when
-    :meth:`Fit.complete` adds its model-fit warnings (then it is computed again)."""
-    key = (getattr(fit, "pending", False), len(fit.warnings))
-    if fit not in _SUMMARIES or _SUMMARIES[fit][0] != key:
-        _SUMMARIES[fit] = (key, fit.summary())
-    return _SUMMARIES[fit][1].copy()  # a caller may add columns to its copy
 
 
 def _data_units(fit):
@@ -935,7 +920,7 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
     slots = _slots(fit)
     if var_names is not None:
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
-    summary = fit_summary(fit)
+    summary = fit.summary()
     ds = fit.group("posterior")
     ncols = min(ncols, len(slots))
     nrows = math.ceil(len(slots) / ncols)
@@ -1013,7 +998,7 @@ def _forest_rows(items, parameter):
         if not isinstance(item, pd.DataFrame):
             item = _as_fit(item)
             unit = unit or parameter_units(item).get(parameter)
-            table = fit_summary(item)
+            table = item.summary()
             post = item.group("posterior")
             dims = ([d for d in post[parameter].dims if d not in ("chain", "draw")]
                     if parameter in post.data_vars else [])

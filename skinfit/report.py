@@ -121,7 +121,7 @@ def fit_diagnostics(fit, summary=None):
     a list of ``(status, message)`` for every WARN and FAIL.
     """
     fit = plots._as_fit(fit)
-    summary = plots.fit_summary(fit) if summary is None else summary
+    summary = fit.summary() if summary is None else summary
     s = fit.attr("sampler")
     c = fit.attr("support_counts")
     t = fit.attr("timings")
@@ -272,8 +272,8 @@ _FITS, _JOBS = [], []  # the fits and figure jobs being drawn, inherited by fork
 def fit_hash(fit):
     """sha256 of what a fit's figures are drawn from: the arrays of every group but the two
     computed from the posterior and the seeds in the attributes (pointwise log-likelihood and
-    predictive draws, up to 200 MB), and the root attributes but ``evidence`` (which a
-    comparison adds to a saved file without changing a figure)."""
+    predictive draws, up to 200 MB), and the root attributes but ``evidence`` and ``loo``
+    (which a comparison adds to a saved file without changing a figure)."""
     import hashlib
 
     from .fit import DEFERRED
@@ -286,7 +286,7 @@ def fit_hash(fit):
             h.update(f"{name}/{var}".encode())
             h.update(np.ascontiguousarray(ds[var].values).tobytes() if ds[var].dtype != object
                      else repr(ds[var].values.tolist()).encode())
-    attrs = {k: v for k, v in tree.attrs.items() if k != "evidence"}
+    attrs = {k: v for k, v in tree.attrs.items() if k not in ("evidence", "loo")}
     h.update(json.dumps(attrs, sort_keys=True, default=str).encode())
     return h.hexdigest()
 
@@ -363,7 +363,7 @@ def render_figures(fits, jobs, figdir):
             for i in {i for j in todo for i in (jobs[j]["fit"].values() if isinstance(jobs[j]["fit"], dict)
                                                  else [jobs[j]["fit"]])}:
                 fits[i].complete()  # each worker draws from the complete tree, computed once here
-                plots.fit_summary(fits[i])  # and from its summary, inherited
+                fits[i].summary()  # and from its summary, inherited
             import matplotlib.backends.backend_pdf  # noqa: F401  imported once, before the fork
             import PIL.PngImagePlugin  # noqa: F401
 
@@ -453,7 +453,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items], number_identical=False)))
     for key, fit in items:
         fit.complete()  # its predictive checks need the deferred groups; the diagnostics then give their time
-        summary = plots.fit_summary(fit)
+        summary = fit.summary()
         diag, issues = fit_diagnostics(fit, summary)
         summary.to_csv(out / f"{key}_summary.csv")
         diag.to_csv(out / f"{key}_diagnostics.csv")

@@ -99,10 +99,9 @@ def subjects_section(fits):
     ``fits``: {key: Fit} of one model. Returns {"labels": {key: label}, "tables": {parameter:
     DataFrame indexed by subject label}}.
     """
-    from .plots import fit_summary
 
     labels = {key: subject_label(f) for key, f in fits.items()}
-    summaries = {key: fit_summary(f) for key, f in fits.items()}
+    summaries = {key: f.summary() for key, f in fits.items()}
     first = next(iter(fits.values()))
     tables = {}
     for s in first.attr("slots"):
