@@ -107,23 +107,12 @@ def _fig_kwargs(width, height, constrained=True):
     return kw
 
 
-def _walker_groups(dt, n_groups=4):
-    """A posterior with emcee's walkers pooled into ``n_groups`` chains (walker j's draws after
-    walker i's within a group), as skinfit's rank histograms group them."""
-    import xarray as xr
+def _walker_groups(fit, n_groups=4):
+    """The posterior with emcee's walkers pooled into ``n_groups`` chains, as skinfit's rank
+    histograms (and, since this bench, its plot_rank) group them."""
+    from skinfit import plots
 
-    post = dt["posterior"].to_dataset()
-    nw = post.sizes["chain"]
-    groups = np.array_split(np.arange(nw), n_groups)
-    size = min(len(g) for g in groups)
-    out = {}
-    for name, da in post.data_vars.items():
-        da = da.transpose("chain", "draw", ...)
-        parts = [da.isel(chain=g[:size]).values.reshape(1, -1, *da.shape[2:]) for g in groups]
-        out[name] = (("chain", "draw", *da.dims[2:]), np.concatenate(parts))
-    ds = xr.Dataset(out, coords={d: post[d] for d in post.dims if d not in ("chain", "draw")})
-    ds = ds.assign_coords(chain=np.arange(n_groups), draw=np.arange(ds.sizes["draw"]))
-    return xr.DataTree.from_dict({"posterior": ds})
+    return plots._walker_groups(fit, n_groups)
 
 
 def _walkers(dt, n=8):
@@ -184,7 +173,7 @@ def az_rank_dist_tuned(fit, ctx):
     import matplotlib as mpl
 
     with mpl.rc_context(_rc()):
-        pc = azp.plot_rank_dist(_walker_groups(fit.idata), backend="matplotlib", compact=False, combined=True,
+        pc = azp.plot_rank_dist(_walker_groups(fit), backend="matplotlib", compact=False, combined=True,
                                 kind="hist", figure_kwargs=_fig_kwargs(*_size_trace(fit)))
         fig = _azp_figure(pc)
         fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: marginals and rank ECDF (4 walker groups)", fontsize=10)
@@ -207,7 +196,7 @@ def az_rank_tuned(fit, ctx):
     import matplotlib as mpl
 
     with mpl.rc_context(_rc()):
-        pc = azp.plot_rank(_walker_groups(fit.idata), backend="matplotlib", col_wrap=4,
+        pc = azp.plot_rank(_walker_groups(fit), backend="matplotlib", col_wrap=4,
                            figure_kwargs=_fig_kwargs(*_size_grid(fit)))
         fig = _azp_figure(pc)
         fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: rank ECDF (4 walker groups)", fontsize=10)
