@@ -47,6 +47,7 @@ import math
 import numpy as np
 from scipy.special import gammaln
 
+from .posterior import standardised_squares
 from .priors import _LOGPDF
 
 __all__ = ["Spec", "run_gibbs", "NU_HYPER", "NU_T"]
@@ -238,11 +239,11 @@ class _Stacked:
         pred, ok = self.model.forward(params, self.x, self.constants)
         total = np.zeros((C, N))
         for o in self.observables:
-            m = np.broadcast_to(pred[o], (C, N))
-            m = np.log(m) if self.noise[o] == "lognormal" else m
             sigma = params[self.sigma[o]]
-            d = self.zbar[o] - m
-            total += 0.5 * (self.ssw[o] + self.counts * d * d) / (sigma * sigma) + self.counts * np.log(sigma)
+            mean = np.broadcast_to(pred[o], (C, N))
+            squares = standardised_squares(self.zbar[o], self.ssw[o], self.counts, mean, sigma,
+                                           self.noise[o] == "lognormal")
+            total += 0.5 * squares + self.counts * np.log(sigma)
         ll = -np.add.reduceat(total, self.starts, axis=1) - self.const
         ok = np.broadcast_to(np.asarray(ok), (C, N))
         return np.where(np.logical_and.reduceat(ok, self.starts, axis=1), ll, -np.inf)

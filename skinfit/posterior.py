@@ -80,6 +80,16 @@ def _transform_for(prior, linear=False):
     return "log" if prior.lower >= 0 and not linear else "identity"
 
 
+def standardised_squares(zbar, ssw, counts, mu, sigma, lognormal):
+    """sum over the rows sharing a distinct covariate row of ((z - m) / sigma)^2, from their
+    sufficient statistics: (ssw + counts (zbar - m)^2) / sigma^2, with z = y, m = mu (normal
+    noise) or z = log y, m = log mu (log-normal).  ``zbar``, ``ssw``, ``counts`` (n_unique,): mean
+    of z, sum of squares about it, number of rows; ``mu``, ``sigma`` (k, n_unique) -> (k, n_unique)."""
+    m = np.log(mu) if lognormal else mu
+    d = zbar - m
+    return (ssw + counts * d * d) / (sigma * sigma)
+
+
 def _take(theta, j):
     """A parameter's values in ``theta`` (k, d), from its index ``j`` (an entry of
     ``Posterior._param_index``): (k, 1) for a column, (k, n) for a per-row gather index (a
@@ -399,9 +409,8 @@ class Posterior:
                     pred[o] = mu_u[:, self._inverse]
                 if noise != "student_t" and not pointwise:
                     sigma = params[f"sigma{self._suffix(o)}"]
-                    m = np.log(mu_u) if noise == "lognormal" else mu_u
-                    d = self._zbar[o] - m
-                    ss = ((self._ssw[o] + self._counts * d * d) / (sigma * sigma)).sum(axis=1)
+                    ss = standardised_squares(self._zbar[o], self._ssw[o], self._counts, mu_u, sigma,
+                                              noise == "lognormal").sum(axis=1)
                     log_sigma = (self.n * np.log(sigma[:, 0]) if sigma.shape[1] == 1
                                  else (self._counts * np.log(sigma)).sum(axis=1))
                     ll[o] = -0.5 * ss - log_sigma - 0.5 * self.n * _LOG_2PI - self._sum_logy.get(o, 0.0)
