@@ -333,7 +333,7 @@ def _inv_wishart(df, psi, rng):
 
 
 def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_target=400, rhat_max=1.01,
-              check_every=100, max_sweeps=20000, keep=1000, shift_move=True, stacked=True, moves="each"):
+              check_every=100, max_sweeps=20000, keep=1000, shift_move=True):
     """Sample the population posterior.
 
     Parameters
@@ -348,6 +348,7 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     ess_target, rhat_max : stop when every hyper-parameter has bulk and tail ESS >= ess_target
         and R-hat <= rhat_max
     keep : draws kept per chain (the chains are thinned to at most this many)
+    shift_move : the location and scale moves (3. above) for weakly informed parameters
 
     Returns
     -------
@@ -360,8 +361,7 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     subs = _Subjects(posts, moments, spec)
     z = np.stack([st[rng.choice(len(st), C, replace=len(st) < C)] for st in starts], axis=1)  # (C, S, d)
     theta, lj = subs.transform(z)
-    if stacked:
-        subs.use_stacked(theta)
+    subs.use_stacked(theta)
     ll = subs.log_likelihood(theta)
     u = _u_of(theta, spec)
     mu = u.mean(axis=1)
@@ -379,7 +379,7 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     within = np.median([np.var(x, axis=0) for x in u_sep], axis=0)
     between = np.var([np.mean(x, axis=0) for x in u_sep], axis=0)
     weak = within > 0.25 * np.maximum(between - within, 1e-3 * between)
-    shift = _ShiftMoves(moves if shift_move else "none", weak, np.sqrt(within / S), spec)
+    shift = _ShiftMoves(shift_move, weak, np.sqrt(within / S), spec)
     draws = {"mu": [], "Sigma": [], "theta": []}
     sweeps, checks, converged, next_check = 0, [], False, burn + check_every
     while sweeps < max_sweeps:
@@ -496,26 +496,19 @@ def _hyper_step(u, mu, Sigma, a, w, spec, rng):
 
 
 class _ShiftMoves:
-    """Blocks of :func:`_shift_move` per sweep and their step sizes.  ``kind``: ``"each"`` (one
-    move of location and scale per weak parameter), ``"joint"`` (one move of all of them),
-    ``"none"``.  Steps: per parameter, the sd of ``mu`` and of ``log sd`` over the second
+    """The :func:`_shift_move` of each weak parameter per sweep (none when not ``enabled``) and
+    their step sizes.  Steps: per parameter, the sd of ``mu`` and of ``log sd`` over the second
     quarter of the burn-in, times a factor per block tuned towards 25% acceptance in the
     burn-in (then fixed, so the kernel is fixed after the burn-in)."""
 
-    def __init__(self, kind, weak, loc0, spec):
-        self.kind, self.spec = kind, spec
+    def __init__(self, enabled, weak, loc0, spec):
+        self.enabled, self.spec = enabled, spec
         self.loc, self.scale = loc0.copy(), np.full(spec.p, 0.3)
         self.hist = []
         self._blocks(weak)
 
     def _blocks(self, weak):
-        idx = np.flatnonzero(weak)
-        if self.kind == "none" or not len(idx):
-            self.blocks = []
-        elif self.kind == "each":
-            self.blocks = [np.array([j]) for j in idx]
-        else:
-            self.blocks = [idx]
+        self.blocks = [np.array([j]) for j in np.flatnonzero(weak)] if self.enabled else []
         self.factor = [2.38 / math.sqrt(2 * len(b)) for b in self.blocks]
         self.n = [0] * len(self.blocks)
         self.acc = [0.0] * len(self.blocks)

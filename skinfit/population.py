@@ -7,8 +7,8 @@ Metropolis-Hastings from its own fit's Gaussian approximation times the current 
 all subjects and chains in one likelihood call; hyper-parameters from their exact
 conditionals; location and scale moves along the non-centred coordinates for weakly informed
 parameters) converges (R-hat <= 1.01, bulk and tail ESS >= 400 for every hyper-parameter)
-for 13 contact_area subjects x 8 parameters in about 10 s CPU and for 100 simulated subjects x
-10 in 154 s, where the emcee hyper-posterior over reweighted draws took 80-84 s for 4
+for 13 contact_area subjects x 8 parameters in about 10 s and for 100 simulated subjects x
+10 in about 180 s (2-core machine), where the emcee hyper-posterior over reweighted draws took 80-84 s for 4
 parameters and did not converge for 8 (3-18 effective draws per subject).  Reweighting is kept
 (``method="reweight"``) for one or two parameters with many draws per subject, where it agrees
 with Gibbs within Monte Carlo error
