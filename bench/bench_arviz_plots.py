@@ -85,7 +85,7 @@ def _azp_figure(pc):
     """The matplotlib Figure of a PlotCollection, taken out of pyplot's registry."""
     import matplotlib.pyplot as plt
 
-    fig = pc.viz["figure"].item() if hasattr(pc, "viz") else pc.get_viz("figure")
+    fig = pc.viz["figure"].item()
     plt.close(fig)
     return fig
 
@@ -155,29 +155,31 @@ def az_trace_default(fit, ctx):
                                            figure_kwargs=_fig_kwargs(*_size_trace(fit), constrained=False)))
 
 
-def az_trace_tuned(fit, ctx):
-    import arviz_plots as azp
+def _tuned(fit, what, draw, **rc):
+    """An arviz-plots figure drawn by ``draw()`` under the tuned rc settings (plus ``rc``),
+    titled "MODEL on DATASET: what"."""
     import matplotlib as mpl
 
-    with mpl.rc_context(_rc()):
-        pc = azp.plot_trace_dist(_walkers(fit.idata), backend="matplotlib", compact=False, combined=True,
-                                 kind="hist", figure_kwargs=_fig_kwargs(*_size_trace(fit)),
-                                 visuals={"trace": {"linewidth": 0.6}})
-        fig = _azp_figure(pc)
-        fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: traces (8 walkers)", fontsize=10)
+    with mpl.rc_context({**_rc(), **rc}):
+        fig = _azp_figure(draw())
+        fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: {what}", fontsize=10)
     return fig
+
+
+def az_trace_tuned(fit, ctx):
+    import arviz_plots as azp
+
+    return _tuned(fit, "traces (8 walkers)", lambda: azp.plot_trace_dist(
+        _walkers(fit.idata), backend="matplotlib", compact=False, combined=True, kind="hist",
+        figure_kwargs=_fig_kwargs(*_size_trace(fit)), visuals={"trace": {"linewidth": 0.6}}))
 
 
 def az_rank_dist_tuned(fit, ctx):
     import arviz_plots as azp
-    import matplotlib as mpl
 
-    with mpl.rc_context(_rc()):
-        pc = azp.plot_rank_dist(_walker_groups(fit), backend="matplotlib", compact=False, combined=True,
-                                kind="hist", figure_kwargs=_fig_kwargs(*_size_trace(fit)))
-        fig = _azp_figure(pc)
-        fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: marginals and rank ECDF (4 walker groups)", fontsize=10)
-    return fig
+    return _tuned(fit, "marginals and rank ECDF (4 walker groups)", lambda: azp.plot_rank_dist(
+        _walker_groups(fit), backend="matplotlib", compact=False, combined=True, kind="hist",
+        figure_kwargs=_fig_kwargs(*_size_trace(fit))))
 
 
 def sk_rank(fit, ctx):
@@ -189,18 +191,6 @@ def az_rank_default(fit, ctx):
     import arviz_plots as azp
     return _azp_figure(azp.plot_rank(fit.idata, backend="matplotlib",
                                      figure_kwargs=_fig_kwargs(*_size_grid(fit), constrained=False)))
-
-
-def az_rank_tuned(fit, ctx):
-    import arviz_plots as azp
-    import matplotlib as mpl
-
-    with mpl.rc_context(_rc()):
-        pc = azp.plot_rank(_walker_groups(fit), backend="matplotlib", col_wrap=4,
-                           figure_kwargs=_fig_kwargs(*_size_grid(fit)))
-        fig = _azp_figure(pc)
-        fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: rank ECDF (4 walker groups)", fontsize=10)
-    return fig
 
 
 def sk_pair(fit, ctx):
@@ -272,14 +262,14 @@ def az_prior_posterior_tuned(fit, ctx):
     import arviz_plots as azp
     import matplotlib as mpl
 
-    with mpl.rc_context({**_rc(), "axes.formatter.limits": (-3, 4)}):
+    def draw():
         pc = azp.plot_prior_posterior(fit.idata, backend="matplotlib", col_wrap=4,
                                       figure_kwargs=_fig_kwargs(*_size_grid(fit)))
-        fig = _azp_figure(pc)
-        for ax in fig.axes:
+        for ax in pc.viz["figure"].item().axes:
             ax.xaxis.set_major_locator(mpl.ticker.MaxNLocator(4))
-        fig.suptitle(f"{fit.model_id} on {fit.dataset_id}: prior vs posterior", fontsize=10)
-    return fig
+        return pc
+
+    return _tuned(fit, "prior vs posterior", draw, **{"axes.formatter.limits": (-3, 4)})
 
 
 def _across(ctx):
@@ -367,9 +357,8 @@ VARIANTS = {
               ("azp.plot_trace_dist, defaults", az_trace_default, ("ea", "eac")),
               ("azp.plot_trace_dist, tuned", az_trace_tuned, ("ea", "eac")),
               ("azp.plot_rank_dist, tuned", az_rank_dist_tuned, ("ea", "eac"))],
-    "rank": [("skinfit plot_rank (azp.plot_rank + title)", sk_rank, ("ea", "eac")),
-             ("azp.plot_rank, defaults", az_rank_default, ("ea", "eac")),
-             ("azp.plot_rank, tuned", az_rank_tuned, ("ea", "eac"))],
+    "rank": [("skinfit plot_rank (= azp.plot_rank, tuned)", sk_rank, ("ea", "eac")),
+             ("azp.plot_rank, defaults", az_rank_default, ("ea", "eac"))],
     "pair": [("skinfit plot_pair", sk_pair, ("ea", "eac")),
              ("azp.plot_pair, defaults", az_pair_default, ("ea", "eac")),
              ("azp.plot_pair, tuned", az_pair_tuned, ("ea", "eac"))],

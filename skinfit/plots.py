@@ -887,25 +887,23 @@ def plot_rank(fit, path=None, *, var_names=None, n_groups=4, ncols=4):
     import arviz_plots as azp
     import matplotlib as mpl
     import matplotlib.pyplot as plt
-    from arviz_base import rcParams
+    from arviz_base import rc_context, rcParams
     from cycler import cycler
 
     tree = _walker_groups(fit, n_groups)
-    n = sum(int(np.prod([s for d, s in da.sizes.items() if d not in ("chain", "draw")] or [1]))
-            for name, da in tree["posterior"].data_vars.items() if var_names is None or name in var_names)
+    n = sum(var_names is None or s["base"] in var_names for s in _slots(fit))  # panels
     cols = max(1, min(ncols, n))
     size = (min(3.0 * cols, MAX_WIDTH), 2.3 * -(-n // cols) + 0.7)
     rc = {"axes.prop_cycle": cycler(color=list(_COLOURS)), "font.size": 9, "axes.titlesize": 9,
           "axes.labelsize": 9, "xtick.labelsize": MIN_FONT, "ytick.labelsize": MIN_FONT,
           "legend.fontsize": MIN_FONT}
-    from arviz_base import rc_context as az_rc_context
-
-    with mpl.rc_context(rc), az_rc_context({"plot.max_subplots": max(n, rcParams["plot.max_subplots"])}):
+    with mpl.rc_context(rc), rc_context({"plot.max_subplots": max(n, rcParams["plot.max_subplots"])}):
         pc = azp.plot_rank(tree, var_names=var_names, backend="matplotlib", col_wrap=cols,
                            figure_kwargs={"figsize": size, "figsize_units": "inches", "layout": "constrained"})
-        fig = pc.viz["figure"].item() if hasattr(pc, "viz") else pc.get_viz("figure")
+        fig = pc.viz["figure"].item()
         plt.close(fig)  # keep pyplot's registry clean; the Figure stays usable
-        _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: rank ECDF ({len(tree['posterior'].chain)} walker groups)")
+        groups = tree["posterior"].sizes["chain"]
+        _suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: rank ECDF ({groups} walker groups)")
     return _finish(fig, path)
 
 
