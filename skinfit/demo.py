@@ -63,7 +63,8 @@ def demo_plan(seed):
                 key = zlib.crc32(f"{ds_id}/{ds.model}/{col}={level}".encode())
                 fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
                 plan.append({"dataset": ds_id, "model": ds.model, "seed": fit_seed, "split": {},
-                             "rows": {col: level}, "n_rows": len(_select(ds, {col: level})), "why": "", "group": f"{col}={level}", "max_steps": 20000})
+                             "rows": {col: level}, "n_rows": len(_select(ds, {col: level})), "why": "",
+                             "group": f"{col}={level}", "max_steps": 20000})
     return plan
 
 

@@ -99,7 +99,6 @@ def subjects_section(fits):
     ``fits``: {key: Fit} of one model. Returns {"labels": {key: label}, "tables": {parameter:
     DataFrame indexed by subject label}}.
     """
-
     labels = {key: subject_label(f) for key, f in fits.items()}
     summaries = {key: f.summary() for key, f in fits.items()}
     first = next(iter(fits.values()))
