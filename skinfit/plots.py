@@ -158,21 +158,45 @@ def _use_log(slot, values):
     return bool(slot["log"] and values.min() > 0 and values.max() > 10 * values.min())
 
 
+class _InView(matplotlib.ticker.Locator):
+    """The ticks of ``base`` that lie in the axis' view: the same marks, but no tick objects made,
+    placed and formatted at every draw for the positions outside it (a log axis' locators
+    return whole decades beyond both ends: about half of its minor ticks)."""
+
+    def __init__(self, base):
+        self.base = base
+
+    def set_axis(self, axis):
+        super().set_axis(axis)
+        self.base.set_axis(axis)
+
+    def __call__(self):
+        lo, hi = sorted(self.axis.get_view_interval())
+        ticks = np.asarray(self.base(), dtype=float)
+        slack = 1e-9 * (hi - lo)  # matplotlib's own test draws a tick this close to an end
+        return ticks[(ticks >= lo - slack) & (ticks <= hi + slack)]
+
+    def tick_values(self, vmin, vmax):
+        return self.base.tick_values(vmin, vmax)
+
+
 def _log_ticks(ax, which="x", numticks=5, sparse=False):
     """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
     on a range of less than 1.5 decades (``sparse``: at most ``numticks`` evenly spaced values
-    away from the ends, for small panels), labelled as plain numbers; no minor tick labels."""
+    away from the ends, for small panels), labelled as plain numbers; no minor tick labels.
+    Only ticks in view are made (:class:`_InView`)."""
     axis = ax.xaxis if which == "x" else ax.yaxis
     lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
     short = math.log10(hi / lo) < 1.5
     if short and sparse:
         axis.set_major_locator(matplotlib.ticker.MaxNLocator(numticks, prune="both"))
         axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
-        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        return
-    axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0) if short else (1.0,),
-                                                        numticks=3 * numticks if short else numticks))
-    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    else:
+        axis.set_major_locator(_InView(matplotlib.ticker.LogLocator(
+            subs=(1.0, 2.0, 5.0) if short else (1.0,), numticks=3 * numticks if short else numticks)))
+        axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    if not isinstance(axis.get_minor_locator(), _InView):  # shared axes share one locator
+        axis.set_minor_locator(_InView(axis.get_minor_locator()))
     axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
 
 
@@ -191,6 +215,29 @@ def _finish(fig, path):
         path.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=_DPI)
     return fig
+
+
+def _fix_layout(fig):
+    """Run the figure's layout engine once and keep its result (no engine left), so that the
+    PNG and then the PDF are drawn without laying the figure out again. Minor ticks carry no
+    labels and so do not move the layout: they are left out while it is measured (making and
+    placing them in each of constrained layout's two passes was a third of a many-panel
+    figure's drawing time)."""
+    engine = fig.get_layout_engine()
+    if engine is None or not fig.axes:
+        return
+    saved = []
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            saved.append((axis, axis.get_minor_locator(), axis.isDefault_minloc))
+            axis.set_minor_locator(matplotlib.ticker.NullLocator())
+    try:
+        engine.execute(fig)
+    finally:
+        for axis, locator, default in reversed(saved):  # shared axes share one locator
+            axis.set_minor_locator(locator)
+            axis.isDefault_minloc = default
+    fig.set_layout_engine(None)
 
 
 def _new_figure(width, height):
