@@ -404,7 +404,8 @@ def ppc_bands(fit):
     for o in spec["observables"]:
         f = _factor(units.get(o))
         draws = _ppc_draws(fit, o)
-        q = np.nanquantile(draws, QUANTILES, axis=0)
+        # np.quantile: the same numbers, vectorised (nanquantile goes column by column)
+        q = (np.nanquantile if np.isnan(draws).any() else np.quantile)(draws, QUANTILES, axis=0)
         floor = observable_floor(fit, o)
         if floor is not None:
             below[o] = float(np.mean(draws < floor))
@@ -610,6 +611,8 @@ def plot_ppc(fit, path=None):
     fig = _new_figure(width, (0.7 * (width - 0.8) / gcols + 0.45 + 0.17 * title_lines) * grows
                       + 0.2 * math.ceil(n_handles / 3) + 0.6)
     rows = _grid(fig, nrows, ncols, n_panels, multi, len(observables), transpose)
+    for ax in fig.axes:  # limits once, from all the data, below: not again after every artist
+        ax.set_autoscale_on(False)  # (each would autoscale all the axes it shares limits with)
     x_label = axis_label(spec["x"], units.get(spec["x"]))
     x_factor = _factor(units.get(spec["x"]))
     reference_drawn = markers_drawn = False
@@ -618,8 +621,10 @@ def plot_ppc(fit, path=None):
         sub = bands[bands["observable"] == o]
         for k, (p, only) in enumerate(cells):
             ax = rows[r][k]
-            ax.set_xscale(spec["xscale"])  # first: a scale set after the artists autoscales them again
-            ax.set_yscale(spec["yscale"])
+            if ax.get_xscale() != spec["xscale"]:  # first: a scale set after the artists autoscales them
+                ax.set_xscale(spec["xscale"])  # again; once: a shared axis sets it on all its siblings
+            if ax.get_yscale() != spec["yscale"]:
+                ax.set_yscale(spec["yscale"])
             for c in range(n_colours) if only is None else [only]:
                 rows_pc = sub[(sub["panel"] == p) & (sub["colour"] == c)]
                 if rows_pc.empty:
@@ -664,6 +669,8 @@ def plot_ppc(fit, path=None):
                 ax.set_title(_wrap(title, ax), fontsize=MIN_FONT + 1)
     if pair:
         _draw_pair_row(fit, rows[-1], cells, pair, spec, units, panel, colour, curves, palette)
+    for ax in fig.axes:
+        ax.autoscale(True)
     for row in rows:
         for ax in row:
             ax.grid(alpha=0.25, lw=0.5)
@@ -802,8 +809,8 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
             si, sj = slots[i], slots[j]
             if i == j:
                 v = values[:, i]
-                ax.hist(v, bins=np.geomspace(v.min(), v.max(), 40) if log[i] else 40, color=_COLOURS[0],
-                        alpha=0.7)
+                counts, edges = np.histogram(v, bins=np.geomspace(v.min(), v.max(), 40) if log[i] else 40)
+                ax.stairs(counts, edges, fill=True, color=_COLOURS[0], alpha=0.7)  # one patch, not 40 bars
                 ax.axvline(mapv[si["name"]], color=_MAP_COLOUR, lw=1)
                 if log[i]:
                     ax.set_xscale("log")
