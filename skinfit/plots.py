@@ -173,11 +173,17 @@ class _InView(matplotlib.ticker.Locator):
     def __call__(self):
         lo, hi = sorted(self.axis.get_view_interval())
         ticks = np.asarray(self.base(), dtype=float)
-        slack = 1e-9 * (hi - lo)  # matplotlib's own test draws a tick this close to an end
+        slack = 1e-9 * (hi - lo)  # a tick at an end, to rounding, is drawn: keep it
         return ticks[(ticks >= lo - slack) & (ticks <= hi + slack)]
 
     def tick_values(self, vmin, vmax):
         return self.base.tick_values(vmin, vmax)
+
+    def nonsingular(self, v0, v1):  # autoscaling asks the major locator (a log one keeps v0 > 0)
+        return self.base.nonsingular(v0, v1)
+
+    def view_limits(self, vmin, vmax):
+        return self.base.view_limits(vmin, vmax)
 
 
 def _log_ticks(ax, which="x", numticks=5, sparse=False):
