@@ -158,21 +158,51 @@ def _use_log(slot, values):
     return bool(slot["log"] and values.min() > 0 and values.max() > 10 * values.min())
 
 
+class _InView(matplotlib.ticker.Locator):
+    """The ticks of ``base`` that lie in the axis' view: the same marks, but no tick objects made,
+    placed and formatted at every draw for the positions outside it (a log axis' locators
+    return whole decades beyond both ends: about half of its minor ticks)."""
+
+    def __init__(self, base):
+        self.base = base
+
+    def set_axis(self, axis):
+        super().set_axis(axis)
+        self.base.set_axis(axis)
+
+    def __call__(self):
+        lo, hi = sorted(self.axis.get_view_interval())
+        ticks = np.asarray(self.base(), dtype=float)
+        slack = 1e-9 * (hi - lo)  # a tick at an end, to rounding, is drawn: keep it
+        return ticks[(ticks >= lo - slack) & (ticks <= hi + slack)]
+
+    def tick_values(self, vmin, vmax):
+        return self.base.tick_values(vmin, vmax)
+
+    def nonsingular(self, v0, v1):  # autoscaling asks the major locator (a log one keeps v0 > 0)
+        return self.base.nonsingular(v0, v1)
+
+    def view_limits(self, vmin, vmax):
+        return self.base.view_limits(vmin, vmax)
+
+
 def _log_ticks(ax, which="x", numticks=5, sparse=False):
     """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
     on a range of less than 1.5 decades (``sparse``: at most ``numticks`` evenly spaced values
-    away from the ends, for small panels), labelled as plain numbers; no minor tick labels."""
+    away from the ends, for small panels), labelled as plain numbers; no minor tick labels.
+    Only ticks in view are made (:class:`_InView`)."""
     axis = ax.xaxis if which == "x" else ax.yaxis
     lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
     short = math.log10(hi / lo) < 1.5
     if short and sparse:
         axis.set_major_locator(matplotlib.ticker.MaxNLocator(numticks, prune="both"))
         axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
-        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        return
-    axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0) if short else (1.0,),
-                                                        numticks=3 * numticks if short else numticks))
-    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    else:
+        axis.set_major_locator(_InView(matplotlib.ticker.LogLocator(
+            subs=(1.0, 2.0, 5.0) if short else (1.0,), numticks=3 * numticks if short else numticks)))
+        axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    if not isinstance(axis.get_minor_locator(), _InView):  # shared axes share one locator
+        axis.set_minor_locator(_InView(axis.get_minor_locator()))
     axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
 
 
@@ -191,6 +221,29 @@ def _finish(fig, path):
         path.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=_DPI)
     return fig
+
+
+def _fix_layout(fig):
+    """Run the figure's layout engine once and keep its result (no engine left), so that the
+    PNG and then the PDF are drawn without laying the figure out again. Minor ticks carry no
+    labels and so do not move the layout: they are left out while it is measured (making and
+    placing them in each of constrained layout's two passes was a third of a many-panel
+    figure's drawing time)."""
+    engine = fig.get_layout_engine()
+    if engine is None or not fig.axes:
+        return
+    saved = []
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            saved.append((axis, axis.get_minor_locator(), axis.isDefault_minloc))
+            axis.set_minor_locator(matplotlib.ticker.NullLocator())
+    try:
+        engine.execute(fig)
+    finally:
+        for axis, locator, default in reversed(saved):  # shared axes share one locator
+            axis.set_minor_locator(locator)
+            axis.isDefault_minloc = default
+    fig.set_layout_engine(None)
 
 
 def _new_figure(width, height):
@@ -357,7 +410,8 @@ def ppc_bands(fit):
     for o in spec["observables"]:
         f = _factor(units.get(o))
         draws = _ppc_draws(fit, o)
-        q = np.nanquantile(draws, QUANTILES, axis=0)
+        # np.quantile: the same numbers, vectorised (nanquantile goes column by column)
+        q = (np.nanquantile if np.isnan(draws).any() else np.quantile)(draws, QUANTILES, axis=0)
         floor = observable_floor(fit, o)
         if floor is not None:
             below[o] = float(np.mean(draws < floor))
@@ -563,6 +617,8 @@ def plot_ppc(fit, path=None):
     fig = _new_figure(width, (0.7 * (width - 0.8) / gcols + 0.45 + 0.17 * title_lines) * grows
                       + 0.2 * math.ceil(n_handles / 3) + 0.6)
     rows = _grid(fig, nrows, ncols, n_panels, multi, len(observables), transpose)
+    for ax in fig.axes:  # limits once, from all the data, below: not again after every artist
+        ax.set_autoscale_on(False)  # (each would autoscale all the axes it shares limits with)
     x_label = axis_label(spec["x"], units.get(spec["x"]))
     x_factor = _factor(units.get(spec["x"]))
     reference_drawn = markers_drawn = False
@@ -571,8 +627,10 @@ def plot_ppc(fit, path=None):
         sub = bands[bands["observable"] == o]
         for k, (p, only) in enumerate(cells):
             ax = rows[r][k]
-            ax.set_xscale(spec["xscale"])  # first: a scale set after the artists autoscales them again
-            ax.set_yscale(spec["yscale"])
+            if ax.get_xscale() != spec["xscale"]:  # first: a scale set after the artists autoscales them
+                ax.set_xscale(spec["xscale"])  # again; once: a shared axis sets it on all its siblings
+            if ax.get_yscale() != spec["yscale"]:
+                ax.set_yscale(spec["yscale"])
             for c in range(n_colours) if only is None else [only]:
                 rows_pc = sub[(sub["panel"] == p) & (sub["colour"] == c)]
                 if rows_pc.empty:
@@ -617,6 +675,8 @@ def plot_ppc(fit, path=None):
                 ax.set_title(_wrap(title, ax), fontsize=MIN_FONT + 1)
     if pair:
         _draw_pair_row(fit, rows[-1], cells, pair, spec, units, panel, colour, curves, palette)
+    for ax in fig.axes:
+        ax.autoscale(True)
     for row in rows:
         for ax in row:
             ax.grid(alpha=0.25, lw=0.5)
@@ -755,8 +815,8 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
             si, sj = slots[i], slots[j]
             if i == j:
                 v = values[:, i]
-                ax.hist(v, bins=np.geomspace(v.min(), v.max(), 40) if log[i] else 40, color=_COLOURS[0],
-                        alpha=0.7)
+                counts, edges = np.histogram(v, bins=np.geomspace(v.min(), v.max(), 40) if log[i] else 40)
+                ax.stairs(counts, edges, fill=True, color=_COLOURS[0], alpha=0.7)  # one patch, not 40 bars
                 ax.axvline(mapv[si["name"]], color=_MAP_COLOUR, lw=1)
                 if log[i]:
                     ax.set_xscale("log")

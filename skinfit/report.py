@@ -387,20 +387,20 @@ def render_figures(fits, jobs, figdir):
 
 def _write_png(fig, path):
     """The figure as a PNG quantised to 256 colours (a third of the size, no visible change for
-    line art) and as a vector PDF (dense scatter rasterised), for papers. The PNG is drawn
-    once into Agg's buffer (no PNG encoded and decoded on the way); the PDF keeps the layout
-    that drawing computed rather than running constrained layout again."""
+    line art) and as a vector PDF (dense scatter rasterised), for papers. The layout is computed
+    once (:func:`plots._fix_layout`), the PNG drawn once into Agg's buffer (no PNG encoded and
+    decoded on the way), and the PDF keeps that layout."""
     import numpy as np
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image
 
     fig.set_dpi(plots._DPI)
     canvas = FigureCanvasAgg(fig)
+    plots._fix_layout(fig)
     canvas.draw()
     image = Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3])
     image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
         path, format="PNG", compress_level=6)
-    fig.set_layout_engine("none")
     fig.savefig(Path(path).with_suffix(".pdf"))
 
 

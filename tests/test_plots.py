@@ -467,3 +467,46 @@ def test_two_observables_with_overlapping_levels_get_a_panel_per_level(tmp_path)
     titles = [a.get_title() for a in fig.axes if a.get_title()]
     assert len(titles) == len(levels) and all(lab in t for lab, t in zip(levels, titles))
     assert not layout_problems(fig)
+
+
+def test_log_axis_makes_only_the_ticks_in_view():
+    """A log axis keeps every tick mark in view (minor at 2..9 x 10^k) but makes no tick for the
+    positions beyond its ends that matplotlib's log locators also return."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4, 3))
+    ax = fig.subplots()
+    ax.plot([0.07, 3.2], [1, 2])
+    ax.set_xscale("log")
+    ax.set_xlim(0.07, 3.2)  # 1.66 decades: majors at the decades
+    plots._log_ticks(ax, "x")
+    FigureCanvasAgg(fig).draw()
+    np.testing.assert_allclose(ax.xaxis.get_majorticklocs(), [0.1, 1.0])
+    minor = [0.07, 0.08, 0.09] + [k / 10 for k in range(2, 10)] + [2.0, 3.0]
+    np.testing.assert_allclose(ax.xaxis.get_minorticklocs(), minor)
+    assert len(ax.xaxis.minorTicks) == len(minor) and len(ax.xaxis.majorTicks) == 2
+
+
+@pytest.mark.parametrize("name", ["ppc", "prior_posterior"])
+def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name, tmp_path):
+    """The report lays each figure out once, its minor ticks left out while it is measured
+    (plots._fix_layout), then draws the PNG and the PDF: the axes land where matplotlib's
+    constrained layout with every tick puts them, and the figure as saved keeps the rules."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from skinfit import report
+
+    fit = fits("contact_area", "contact_area_synthetic")  # log axes on both sides, many panels
+    func = dict(FIGURES)[name]
+    ref = func(fit)
+    ref.set_dpi(plots._DPI)
+    FigureCanvasAgg(ref).draw()
+    fig = func(fit)
+    report._write_png(fig, tmp_path / "f.png")
+    assert fig.get_layout_engine() is None
+    assert any(len(ax.xaxis.get_minorticklocs()) + len(ax.yaxis.get_minorticklocs()) for ax in fig.axes)
+    np.testing.assert_allclose([ax.get_position().bounds for ax in fig.axes],
+                               [ax.get_position().bounds for ax in ref.axes], atol=1e-9)
+    assert (tmp_path / "f.pdf").read_bytes()[:5] == b"%PDF-"
+    assert not layout_problems(fig)
