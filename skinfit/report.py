@@ -291,11 +291,21 @@ def fit_hash(fit):
     return h.hexdigest()
 
 
-def _settings_hash():
-    """The figures' code: plots.py and this module (an edited plot draws again)."""
+def _code_key(func):
+    """What draws a figure: the package source and plotting libraries' versions
+    (:func:`skinfit.figure_store.code_hash`) and the plot function's own code as it is now
+    in this process (a replaced function draws again)."""
     import hashlib
 
-    return hashlib.sha256(Path(plots.__file__).read_bytes() + Path(__file__).read_bytes()).hexdigest()[:16]
+    from .figure_store import code_hash
+
+    def text(code):  # its bytecode, names and constants, nested functions included
+        consts = [text(c) if hasattr(c, "co_code") else repr(c) for c in code.co_consts]
+        return repr((code.co_code, code.co_names, code.co_varnames, consts))
+
+    f = getattr(plots, func)
+    own = text(f.__code__) if hasattr(f, "__code__") else repr(f)
+    return f"{code_hash()[:16]}.{hashlib.sha256(own.encode()).hexdigest()[:16]}"
 
 
 def _job_fits(job):
@@ -326,10 +336,14 @@ def render_figures(fits, jobs, figdir):
     whose fits' content (:func:`fit_hash`), function, arguments and plotting code are those
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
     drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
-    unavailable), costliest first. Returns one error text or None per job."""
+    unavailable), costliest first, unless :mod:`skinfit.figure_store` holds them from an
+    earlier report of the same content. Returns one error text or None per job."""
+    import hashlib
     import multiprocessing
     import os
     from concurrent.futures import ProcessPoolExecutor
+
+    from . import figure_store
 
     global _FITS, _JOBS
     manifest_path = figdir / ".figures.json"
@@ -337,23 +351,34 @@ def render_figures(fits, jobs, figdir):
         manifest = json.loads(manifest_path.read_text())
     except (OSError, ValueError):
         manifest = {}
-    settings = _settings_hash()
-    hashes = {}
+    hashes, storable = {}, {}
 
     def content(i):
         if i not in hashes:
             hashes[i] = fit_hash(fits[i])
         return hashes[i]
 
+    def fit_indices(job):
+        return list(job["fit"].values()) if isinstance(job["fit"], dict) else [job["fit"]]
+
     keys = []
     for job in jobs:
         which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
         inputs = ",".join(f"{label}={content(i)}" for label, i in which)
         keys.append(f"{inputs}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
-                    f"{settings}")
+                    f"{_code_key(job['func'])}")
     todo = [i for i, (job, key) in enumerate(zip(jobs, keys))
             if manifest.get(job["path"].name) != key or not job["path"].exists()
             or not job["path"].with_suffix(".pdf").exists()]
+    stored = {}  # job -> its key's digest in the figure store, for jobs whose fits may be stored
+    for i in todo:
+        for j in fit_indices(jobs[i]):
+            if j not in storable:
+                storable[j] = figure_store.storable(fits[j])
+        if all(storable[j] for j in fit_indices(jobs[i])):
+            stored[i] = hashlib.sha256(keys[i].encode()).hexdigest()
+    fetched = {i for i in stored if figure_store.fetch(stored[i], jobs[i]["path"])}
+    todo = [i for i in todo if i not in fetched]
     todo.sort(key=lambda i: -_COST.get(jobs[i]["func"], 1))  # stable: the report's order within a kind
     errors = [None] * len(jobs)
     _FITS, _JOBS = fits, jobs
@@ -377,6 +402,11 @@ def render_figures(fits, jobs, figdir):
     finally:
         _FITS, _JOBS = [], []
     for i in todo:
+        if errors[i] is None and i in stored:
+            figure_store.put(stored[i], jobs[i]["path"])
+    if any(i in stored for i in todo):
+        figure_store.trim()
+    for i in [*todo, *fetched]:
         if errors[i] is None:
             manifest[jobs[i]["path"].name] = keys[i]
         else:
