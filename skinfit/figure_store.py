@@ -73,7 +73,7 @@ def storable(fit):
     """True when ``fit`` is of a shipped model card, unchanged since the fit, whose functions are
     all skinfit's own: then its figures follow from its content and :func:`code_hash`."""
     from .models import load_model
-    from .paths import shipped_root
+    from .paths import locate, shipped_root
     from .registry import resolve
 
     try:
@@ -81,8 +81,8 @@ def storable(fit):
         shipped = shipped_root()
         if shipped is None or model.sha256 != fit.attrs.get("model_sha256"):
             return False
-        if Path(model.path).resolve().parent != (Path(shipped) / "models").resolve():
-            return False
+        if Path(locate("models", fit.model_id)).resolve().parent != (Path(shipped) / "models").resolve():
+            return False  # a card of the user's that shadows a shipped one
         refs = [("forward", model.forward_ref), *(("shear", r) for r in model.shear.values()),
                 *(("shift", r) for r in model.shift.values())]
         if model.derived.get("function"):

@@ -106,3 +106,10 @@ def test_the_store_is_trimmed_least_recently_used_first(store, monkeypatch, tmp_
     kept = {p.stem for p in store.glob("??/*.json")}
     assert kept == {used, hashlib.sha256(b"new").hexdigest()}
     assert not list(store.glob(f"??/{hashlib.sha256(b'old').hexdigest()}*"))
+
+
+def test_storable_wherever_the_process_runs(ea_fit, tmp_path, monkeypatch):
+    """The shipped card is recognised by its location, not by a path relative to the
+    working folder (a report run from any folder)."""
+    monkeypatch.chdir(tmp_path)
+    assert figure_store.storable(ea_fit)
