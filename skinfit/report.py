@@ -330,14 +330,15 @@ def _init_worker(parent):
     _watch_parent(parent)
 
 
-def render_figures(fits, jobs, figdir):
+def render_figures(fits, jobs, figdir, workers=None):
     """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits;
     func: plots function name; args; optional kwargs; path}), each once per input: a figure
     whose fits' content (:func:`fit_hash`), function, arguments and plotting code are those
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
     drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
-    unavailable), costliest first, unless :mod:`skinfit.figure_store` holds them from an
-    earlier report of the same content. Returns one error text or None per job."""
+    unavailable; at most ``workers``), costliest first, unless :mod:`skinfit.figure_store`
+    holds them from an earlier drawing of the same content. Returns one error text or None
+    per job."""
     import hashlib
     import multiprocessing
     import os
@@ -382,7 +383,7 @@ def render_figures(fits, jobs, figdir):
     todo.sort(key=lambda i: -_COST.get(jobs[i]["func"], 1))  # stable: the report's order within a kind
     errors = [None] * len(jobs)
     _FITS, _JOBS = fits, jobs
-    workers = min(MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
+    workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
             for i in {i for j in todo for i in (jobs[j]["fit"].values() if isinstance(jobs[j]["fit"], dict)
@@ -432,6 +433,48 @@ def _write_png(fig, path):
         path, format="PNG", compress_level=6)
     fig.set_layout_engine("none")
     fig.savefig(Path(path).with_suffix(".pdf"))
+
+
+def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
+    """The figure jobs (see :func:`render_figures`) of one fit's section, each with its report
+    ``entry`` (file, PDF, caption, alt text): ``fit`` is fit number ``index``, its files named
+    ``key``; ``n_of_model`` fits of its model in the report (from :data:`MANY_FITS` on, each
+    fit's section draws only its predictive check: the parameters are compared across the fits
+    in one forest plot each)."""
+    jobs = []
+    for name, make, caption in _FIGURES if n_of_model < MANY_FITS else _FIGURES[:1]:
+        path = figdir / f"{key}_{name}.png"
+        entry = {"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
+                 "pdf": f"figures/{path.stem}.pdf"}
+        jobs.append({"fit": index, "func": make.__name__, "args": (), "path": path, "entry": entry})
+    for pname, dims in _split_parameters(fit).items():
+        path = figdir / f"{key}_forest_{pname}.png"
+        entry = {"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
+                 "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
+                 "alt": f"forest plot of {pname} per {dims} ({where})"}
+        jobs.append({"fit": index, "func": "plot_forest", "args": (pname,), "path": path, "entry": entry})
+    return jobs
+
+
+def store_fit_figures(path, n_of_model=1):
+    """Draw the section figures of the fit saved at ``path`` into the figure store
+    (:mod:`skinfit.figure_store`), ahead of a report that will copy them (``skinfit demo``
+    draws them in its fit workers while other fits run). Nothing when the store is off or the
+    fit is not storable; one process, no figure workers. Returns the number of figures drawn."""
+    import tempfile
+
+    from . import figure_store
+    from .fit import load_fit
+
+    if figure_store.store_dir() is None:
+        return 0
+    fit = load_fit(path)
+    if not figure_store.storable(fit):
+        return 0
+    with tempfile.TemporaryDirectory(prefix="skinfit-figures-") as tmp:
+        jobs = fit_figure_jobs(fit, 0, "fit", Path(tmp), n_of_model)
+        errors = render_figures([fit], jobs, Path(tmp), workers=1)
+    return sum(e is None for e in errors)
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
@@ -492,23 +535,9 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
         shown.index = [level_names(fit).get(n, n) for n in shown.index]
         where = f"{labels[key]} on {fit.dataset_id}"
-        figures = []
-        # a model fitted to many subjects: each subject's section keeps its predictive check; the
-        # parameters are compared across subjects in one forest plot each (the figures thinned)
-        kinds = _FIGURES if per_model[fit.model_id] < MANY_FITS else _FIGURES[:1]
-        for name, make, caption in kinds:
-            path = figdir / f"{key}_{name}.png"
-            figures.append({"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
-                            "pdf": f"figures/{path.stem}.pdf"})
-            jobs.append({"fit": len(sections), "func": make.__name__, "args": (), "path": path,
-                         "entry": figures[-1]})
-        for pname, dims in _split_parameters(fit).items():
-            path = figdir / f"{key}_forest_{pname}.png"
-            figures.append({"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
-                            "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
-                            "alt": f"forest plot of {pname} per {dims} ({where})"})
-            jobs.append({"fit": len(sections), "func": "plot_forest", "args": (pname,), "path": path,
-                         "entry": figures[-1]})
+        section_jobs = fit_figure_jobs(fit, len(sections), key, figdir, per_model[fit.model_id], where)
+        figures = [job["entry"] for job in section_jobs]
+        jobs += section_jobs
         issues_all += [{"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues]
         prov = _provenance(fit)
         sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
