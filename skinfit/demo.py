@@ -4,7 +4,9 @@ variants, compared by evidence and LOO, and written up as one static report.
 Fits run in parallel worker processes (``--jobs``, default one per core); each fit's seed is
 derived from the demo seed and the (dataset, model) pair, so results do not depend on the
 number of workers or the order in which fits finish. A fit already saved under ``--out``
-(same seed) is reused, so an interrupted demo continues where it stopped.
+(same seed) is reused, so an interrupted demo continues where it stopped. The same workers
+draw each new fit's report figures into the figure store (:mod:`skinfit.figure_store`) while
+this process compares the fits and runs the population; the report then copies them.
 """
 
 import json
@@ -12,7 +14,9 @@ import os
 import sys
 import time
 import zlib
-from concurrent.futures import ProcessPoolExecutor
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -143,7 +147,6 @@ def _reuse(path, item, datasets):
 
 def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, datasets=None, echo=print):
     """Fit, compare and report every shipped dataset; returns the report's index.html path."""
-    from .compare import compare
     from .fit import load_fit
     from .report import write_report
 
@@ -161,15 +164,44 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
         echo(f"  {p['dataset']:<28} {p['model'] + (' ' + p['group'] if p.get('group') else ''):<30} "
              f"seed {p['seed']}{extra}")
     jobs = jobs or min(len(todo), os.cpu_count() or 1) or 1
-    if todo:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(_run_one, p, path) for p, path in todo]
-            for fut in futures:
+    with ExitStack() as stack:
+        drawing = []  # each new fit's report figures, drawn into the figure store by the fit workers
+        if todo:    # while this process loads the fits, compares them and runs the population
+            pool = stack.enter_context(ProcessPoolExecutor(max_workers=jobs))
+            futures = {pool.submit(_run_one, p, path): (p, path) for p, path in todo}
+            n_of_model = Counter(p["model"] for p in plan)
+            for fut in as_completed(futures):
                 r = fut.result()
                 flag = "converged" if r["converged"] else "NOT CONVERGED (see the report)"
                 echo(f"  done {r['dataset']} / {r['model']}: {r['seconds']:.1f} s, {flag}")
-    fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
-            f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
+                p, path = futures[fut]
+                drawing.append(pool.submit(_draw_one, path, n_of_model[p["model"]]))
+        fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
+                f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
+        comparisons, populations, contrasts = _analyses(fits, plan, out, seed, echo)
+        for fut in drawing:  # a figure not drawn here (even a lost worker) is drawn by the report
+            fut.exception()
+    index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets",
+                         comparison=comparisons or None, populations=populations, contrasts=contrasts)
+    (Path(report) / "demo_plan.json").write_text(json.dumps(plan, indent=1) + "\n")
+    echo(f"\nreport: {index}")
+    return index
+
+
+def _draw_one(path, n_of_model):
+    """A new fit's report figures into the figure store (top level: runs in a fit worker); a
+    figure that fails is left for the report, which draws it again and lists the error."""
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    from .report import store_fit_figures
+
+    return store_fit_figures(path, n_of_model)
+
+
+def _analyses(fits, plan, out, seed, echo):
+    """The comparison tables of each dataset's competing models, the populations and the
+    contrasts of the demo's fits."""
+    from .compare import compare
+
     comparisons = {}
     for ds_id in dict.fromkeys(p["dataset"] for p in plan):
         items = [(name, f, p) for (name, f), p in zip(fits.items(), plan)
@@ -189,11 +221,7 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     if populations or contrasts:
         echo(f"\npopulation of {', '.join(populations) or 'none'} and {len(contrasts)} contrast table(s): "
              f"{time.perf_counter() - t0:.1f} s")
-    index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets",
-                         comparison=comparisons or None, populations=populations, contrasts=contrasts)
-    (Path(report) / "demo_plan.json").write_text(json.dumps(plan, indent=1) + "\n")
-    echo(f"\nreport: {index}")
-    return index
+    return comparisons, populations, contrasts
 
 
 def cli_demo(args):

@@ -291,11 +291,21 @@ def fit_hash(fit):
     return h.hexdigest()
 
 
-def _settings_hash():
-    """The figures' code: plots.py and this module (an edited plot draws again)."""
+def _code_key(func):
+    """What draws a figure: the package source and plotting libraries' versions
+    (:func:`skinfit.figure_store.code_hash`) and the plot function's own code as it is now
+    in this process (a replaced function draws again)."""
     import hashlib
 
-    return hashlib.sha256(Path(plots.__file__).read_bytes() + Path(__file__).read_bytes()).hexdigest()[:16]
+    from .figure_store import code_hash
+
+    def text(code):  # its bytecode, names and constants, nested functions included
+        consts = [text(c) if hasattr(c, "co_code") else repr(c) for c in code.co_consts]
+        return repr((code.co_code, code.co_names, code.co_varnames, consts))
+
+    f = getattr(plots, func)
+    own = text(f.__code__) if hasattr(f, "__code__") else repr(f)
+    return f"{code_hash()[:16]}.{hashlib.sha256(own.encode()).hexdigest()[:16]}"
 
 
 def _job_fits(job):
@@ -320,16 +330,21 @@ def _init_worker(parent):
     _watch_parent(parent)
 
 
-def render_figures(fits, jobs, figdir):
+def render_figures(fits, jobs, figdir, workers=None):
     """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits;
     func: plots function name; args; optional kwargs; path}), each once per input: a figure
     whose fits' content (:func:`fit_hash`), function, arguments and plotting code are those
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
     drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
-    unavailable), costliest first. Returns one error text or None per job."""
+    unavailable; at most ``workers``), costliest first, unless :mod:`skinfit.figure_store`
+    holds them from an earlier drawing of the same content. Returns one error text or None
+    per job."""
+    import hashlib
     import multiprocessing
     import os
     from concurrent.futures import ProcessPoolExecutor
+
+    from . import figure_store
 
     global _FITS, _JOBS
     manifest_path = figdir / ".figures.json"
@@ -337,27 +352,38 @@ def render_figures(fits, jobs, figdir):
         manifest = json.loads(manifest_path.read_text())
     except (OSError, ValueError):
         manifest = {}
-    settings = _settings_hash()
-    hashes = {}
+    hashes, storable = {}, {}
 
     def content(i):
         if i not in hashes:
             hashes[i] = fit_hash(fits[i])
         return hashes[i]
 
+    def fit_indices(job):
+        return list(job["fit"].values()) if isinstance(job["fit"], dict) else [job["fit"]]
+
     keys = []
     for job in jobs:
         which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
         inputs = ",".join(f"{label}={content(i)}" for label, i in which)
         keys.append(f"{inputs}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
-                    f"{settings}")
+                    f"{_code_key(job['func'])}")
     todo = [i for i, (job, key) in enumerate(zip(jobs, keys))
             if manifest.get(job["path"].name) != key or not job["path"].exists()
             or not job["path"].with_suffix(".pdf").exists()]
+    stored = {}  # job -> its key's digest in the figure store, for jobs whose fits may be stored
+    for i in todo:
+        for j in fit_indices(jobs[i]):
+            if j not in storable:
+                storable[j] = figure_store.storable(fits[j])
+        if all(storable[j] for j in fit_indices(jobs[i])):
+            stored[i] = hashlib.sha256(keys[i].encode()).hexdigest()
+    fetched = {i for i in stored if figure_store.fetch(stored[i], jobs[i]["path"])}
+    todo = [i for i in todo if i not in fetched]
     todo.sort(key=lambda i: -_COST.get(jobs[i]["func"], 1))  # stable: the report's order within a kind
     errors = [None] * len(jobs)
     _FITS, _JOBS = fits, jobs
-    workers = min(MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
+    workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
             for i in {i for j in todo for i in (jobs[j]["fit"].values() if isinstance(jobs[j]["fit"], dict)
@@ -377,6 +403,11 @@ def render_figures(fits, jobs, figdir):
     finally:
         _FITS, _JOBS = [], []
     for i in todo:
+        if errors[i] is None and i in stored:
+            figure_store.put(stored[i], jobs[i]["path"])
+    if any(i in stored for i in todo):
+        figure_store.trim()
+    for i in [*todo, *fetched]:
         if errors[i] is None:
             manifest[jobs[i]["path"].name] = keys[i]
         else:
@@ -402,6 +433,48 @@ def _write_png(fig, path):
     image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
         path, format="PNG", compress_level=6)
     fig.savefig(Path(path).with_suffix(".pdf"))
+
+
+def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
+    """The figure jobs (see :func:`render_figures`) of one fit's section, each with its report
+    ``entry`` (file, PDF, caption, alt text): ``fit`` is fit number ``index``, its files named
+    ``key``; ``n_of_model`` fits of its model in the report (from :data:`MANY_FITS` on, each
+    fit's section draws only its predictive check: the parameters are compared across the fits
+    in one forest plot each)."""
+    jobs = []
+    for name, make, caption in _FIGURES if n_of_model < MANY_FITS else _FIGURES[:1]:
+        path = figdir / f"{key}_{name}.png"
+        entry = {"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
+                 "pdf": f"figures/{path.stem}.pdf"}
+        jobs.append({"fit": index, "func": make.__name__, "args": (), "path": path, "entry": entry})
+    for pname, dims in _split_parameters(fit).items():
+        path = figdir / f"{key}_forest_{pname}.png"
+        entry = {"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
+                 "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
+                 "alt": f"forest plot of {pname} per {dims} ({where})"}
+        jobs.append({"fit": index, "func": "plot_forest", "args": (pname,), "path": path, "entry": entry})
+    return jobs
+
+
+def store_fit_figures(path, n_of_model=1):
+    """Draw the section figures of the fit saved at ``path`` into the figure store
+    (:mod:`skinfit.figure_store`), ahead of a report that will copy them (``skinfit demo``
+    draws them in its fit workers while other fits run). Nothing when the store is off or the
+    fit is not storable; one process, no figure workers. Returns the number of figures drawn."""
+    import tempfile
+
+    from . import figure_store
+    from .fit import load_fit
+
+    if figure_store.store_dir() is None:
+        return 0
+    fit = load_fit(path)
+    if not figure_store.storable(fit):
+        return 0
+    with tempfile.TemporaryDirectory(prefix="skinfit-figures-") as tmp:
+        jobs = fit_figure_jobs(fit, 0, "fit", Path(tmp), n_of_model)
+        errors = render_figures([fit], jobs, Path(tmp), workers=1)
+    return sum(e is None for e in errors)
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
@@ -462,23 +535,9 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
         shown.index = [level_names(fit).get(n, n) for n in shown.index]
         where = f"{labels[key]} on {fit.dataset_id}"
-        figures = []
-        # a model fitted to many subjects: each subject's section keeps its predictive check; the
-        # parameters are compared across subjects in one forest plot each (the figures thinned)
-        kinds = _FIGURES if per_model[fit.model_id] < MANY_FITS else _FIGURES[:1]
-        for name, make, caption in kinds:
-            path = figdir / f"{key}_{name}.png"
-            figures.append({"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
-                            "pdf": f"figures/{path.stem}.pdf"})
-            jobs.append({"fit": len(sections), "func": make.__name__, "args": (), "path": path,
-                         "entry": figures[-1]})
-        for pname, dims in _split_parameters(fit).items():
-            path = figdir / f"{key}_forest_{pname}.png"
-            figures.append({"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
-                            "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
-                            "alt": f"forest plot of {pname} per {dims} ({where})"})
-            jobs.append({"fit": len(sections), "func": "plot_forest", "args": (pname,), "path": path,
-                         "entry": figures[-1]})
+        section_jobs = fit_figure_jobs(fit, len(sections), key, figdir, per_model[fit.model_id], where)
+        figures = [job["entry"] for job in section_jobs]
+        jobs += section_jobs
         issues_all += [{"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues]
         prov = _provenance(fit)
         sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,

@@ -18,3 +18,16 @@ def ea_fit():
     import skinfit
 
     return skinfit.fit("electroadhesion", "electroadhesion_synthetic", rng=1)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _figure_store(tmp_path_factory):
+    """Figures drawn by the tests are kept in a folder of this session (and seen by the CLI
+    processes the tests start), never in the user's cache folder."""
+    old = os.environ.get("SKINFIT_FIGURE_STORE")
+    os.environ["SKINFIT_FIGURE_STORE"] = str(tmp_path_factory.mktemp("figure_store"))
+    yield
+    if old is None:
+        os.environ.pop("SKINFIT_FIGURE_STORE", None)
+    else:
+        os.environ["SKINFIT_FIGURE_STORE"] = old

@@ -26,12 +26,22 @@ def test_plan_covers_every_shipped_dataset_with_its_variants():
 
 
 def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
+    from skinfit import report as report_module
+
+    drawn = []  # figures the report process draws itself (one figure worker: in this process)
+    render = report_module._render_one
+    monkeypatch.setattr(report_module, "MAX_FIGURE_WORKERS", 1)
+    monkeypatch.setattr(report_module, "_render_one", lambda i: drawn.append(i) or render(i))
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic", "--jobs", "2"]) == 0
     text = capsys.readouterr().out
     assert "ranked by evidence" in text and "report:" in text
     report = out / "report"
     assert (report / "index.html").exists() and (report / "comparison_electroadhesion_synthetic.csv").exists()
+    # every fit's figures were drawn by the fit workers into the figure store, and copied
+    figures = sorted((report / "figures").glob("electroadhesion_synthetic_*.png"))
+    assert len(figures) == 3 * len(report_module._FIGURES) and drawn == []
+    assert all(f.with_suffix(".pdf").stat().st_size > 0 for f in figures)
     plan = json.loads((report / "demo_plan.json").read_text())
     assert [p["model"] for p in plan] == ["electroadhesion", "electroadhesion_coulomb", "electroadhesion_empirical"]
     from skinfit.compare import loo

@@ -1,0 +1,115 @@
+"""The figure store: a figure is drawn once per content, whichever report folder asks for it,
+and never reused for other content, other code, an altered stored file or a user's own model."""
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+from skinfit import figure_store, plots, report
+from skinfit.fit import load_fit
+
+
+@pytest.fixture
+def store(tmp_path, monkeypatch):
+    folder = tmp_path / "store"
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", str(folder))
+    return folder
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The indices of the figure jobs drawn (one worker: drawn in this process)."""
+    calls = []
+    original = report._render_one
+    monkeypatch.setattr(report, "MAX_FIGURE_WORKERS", 1)
+    monkeypatch.setattr(report, "_render_one", lambda i: calls.append(i) or original(i))
+    return calls
+
+
+def _render(fit, folder, func="plot_prior_posterior"):
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"fit_{func}.png"
+    errors = report.render_figures([fit], [{"fit": 0, "func": func, "args": (), "path": path}], folder)
+    assert errors == [None]
+    return path
+
+
+def _digest(path):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def test_a_figure_is_drawn_once_per_content_whichever_folder(ea_fit, store, drawn, tmp_path):
+    first = _render(ea_fit, tmp_path / "a")
+    assert drawn == [0]
+    second = _render(ea_fit, tmp_path / "b")
+    assert drawn == [0], "the same fit's figure in a new report folder is copied, not drawn"
+    for suffix in (".png", ".pdf"):
+        assert _digest(first.with_suffix(suffix)) == _digest(second.with_suffix(suffix))
+    assert len(list(store.glob("??/*.json"))) == 1
+
+    ea_fit.save(tmp_path / "fit.nc")
+    other = load_fit(tmp_path / "fit.nc")
+    name = next(iter(other.group("posterior").data_vars))
+    other.idata["posterior"][name].values[0, 0] *= 1.5  # one draw of one walker changed
+    _render(other, tmp_path / "c")
+    assert drawn == [0, 0], "other content is drawn, never taken from the store"
+
+
+def test_an_altered_stored_figure_is_drawn_again(ea_fit, store, drawn, tmp_path):
+    _render(ea_fit, tmp_path / "a")
+    (png,) = store.glob("??/*.png")
+    png.write_bytes(png.read_bytes()[:-10])  # a damaged entry (truncated)
+    again = _render(ea_fit, tmp_path / "b")
+    assert drawn == [0, 0]
+    assert _digest(png) == _digest(again), "the entry is written whole again"
+
+
+def test_a_replaced_plot_function_draws_again(ea_fit, store, drawn, tmp_path, monkeypatch):
+    _render(ea_fit, tmp_path / "a")
+    original = plots.plot_prior_posterior
+    monkeypatch.setattr(plots, "plot_prior_posterior", lambda fit, *a, **k: original(fit, *a, **k))
+    _render(ea_fit, tmp_path / "b")
+    assert drawn == [0, 0]
+
+
+def test_only_unchanged_shipped_models_are_stored(ea_fit, tmp_path):
+    assert figure_store.storable(ea_fit)
+    ea_fit.save(tmp_path / "fit.nc")
+    edited = load_fit(tmp_path / "fit.nc")
+    edited.idata.attrs["model_sha256"] = "0" * 64  # fitted with another card of that name
+    assert not figure_store.storable(edited)
+
+
+def test_turned_off_stores_nothing(ea_fit, tmp_path, drawn, monkeypatch):
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")
+    assert figure_store.store_dir() is None
+    _render(ea_fit, tmp_path / "a")
+    _render(ea_fit, tmp_path / "b")
+    assert drawn == [0, 0]
+
+
+def test_the_store_is_trimmed_least_recently_used_first(store, monkeypatch, tmp_path):
+    import os
+
+    src = tmp_path / "fig.png"
+    for k, stem in enumerate(("old", "used", "new")):
+        src.write_bytes(bytes([k]) * 4000)
+        src.with_suffix(".pdf").write_bytes(bytes([k]) * 4000)
+        digest = hashlib.sha256(stem.encode()).hexdigest()
+        figure_store.put(digest, src)
+        os.utime(store / digest[:2] / f"{digest}.json", (1e9 + k, 1e9 + k))
+    used = hashlib.sha256(b"used").hexdigest()
+    assert figure_store.fetch(used, tmp_path / "copy.png")  # now the most recently used
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE_MB", str(17000 / 2**20))  # room for two entries
+    figure_store.trim()
+    kept = {p.stem for p in store.glob("??/*.json")}
+    assert kept == {used, hashlib.sha256(b"new").hexdigest()}
+    assert not list(store.glob(f"??/{hashlib.sha256(b'old').hexdigest()}*"))
+
+
+def test_storable_wherever_the_process_runs(ea_fit, tmp_path, monkeypatch):
+    """The shipped card is recognised by its location, not by a path relative to the
+    working folder (a report run from any folder)."""
+    monkeypatch.chdir(tmp_path)
+    assert figure_store.storable(ea_fit)
