@@ -811,7 +811,12 @@ class Fit:
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
         # is an OSError with the previous file in place
         tree = self.idata
-        tree.attrs[SUMMARY_ATTR] = _summary_to_attr(self.summary(), self._summary_key())
+        try:
+            tree.attrs[SUMMARY_ATTR] = _summary_to_attr(self.summary(), self._summary_key())
+        except Exception as exc:  # noqa: BLE001 - the summary is only kept to save time: the fit is saved without it
+            tree.attrs.pop(SUMMARY_ATTR, None)
+            warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
+                          f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)
         dask = sys.modules.get("dask")  # in a Dask worker xarray would take a distributed lock named by the target
         with (dask.config.set(scheduler="synchronous") if dask is not None else nullcontext()), \
                 _distributed_unimported():
@@ -925,13 +930,13 @@ class _StoredGroups:
         import h5netcdf
 
         with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
-            if h.variables or any(g.groups for g in h.groups.values()):
-                self.names = []  # not the layout Fit.save writes: xarray reads it whole
-                return xr.open_datatree(self.path, engine="h5netcdf").load()
+            order = list(h.groups)  # names only: a group's metadata is read when it is opened
+            light = {g: h.groups[g] for g in order if g not in DEFERRED}
+            if h.variables or any(g.groups for g in light.values()):
+                return xr.open_datatree(self.path, engine="h5netcdf").load()  # not Fit.save's layout
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
-            self.order = list(h.groups)
-            self.names = [g for g in self.order if g in DEFERRED]
-            nodes = {g: _decoded(h.groups[g]) for g in self.order if g not in DEFERRED}
+            nodes = {g: _decoded(group) for g, group in light.items()}
+        self.order, self.names = order, [g for g in order if g in DEFERRED]
         return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
 
     def read(self, tree):
@@ -946,7 +951,11 @@ class _StoredGroups:
             raise InputError(self.path, "changed or removed since the fit was loaded: load it again "
                                         "(its pointwise log-likelihood and predictive draws are read on first use)")
         with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
-            extra = {g: _decoded(h.groups[g]) for g in self.names}
+            groups = {g: h.groups[g] for g in self.names}
+            if any(group.groups for group in groups.values()):
+                raise InputError(self.path, f"groups inside {', '.join(g for g in groups if groups[g].groups)}: "
+                                            "not a fit file skinfit writes")
+            extra = {g: _decoded(group) for g, group in groups.items()}
         nodes = {n: tree[n].to_dataset(inherit=False) for n in tree.children} | extra
         order = [g for g in self.order if g in nodes] + [g for g in nodes if g not in self.order]
         return xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)} | {n: nodes[n] for n in order})

@@ -91,6 +91,29 @@ def test_saved_summary_is_read_back_with_the_same_numbers_without_computing_it(e
     assert back.summary().attrs == ea_fit.summary().attrs
 
 
+def test_a_fit_whose_summary_fails_is_saved_without_it(ea_fit, tmp_path, monkeypatch):
+    """The stored summary only saves time: when it cannot be computed the fit is saved all the
+    same (with a warning), and the summary is computed when the file is read."""
+    import xarray as xr
+
+    path = ea_fit.save(tmp_path / "fit.nc")
+    tree = xr.open_datatree(path).load()
+    del tree.attrs["summary"]
+    tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
+    fit_module = importlib.import_module("skinfit.fit")
+
+    def fail(self):
+        raise ValueError("no summary here")
+
+    with monkeypatch.context() as m:
+        m.setattr(fit_module.Fit, "_compute_summary", fail)
+        with pytest.warns(UserWarning, match="saved without its summary table .ValueError: no summary here"):
+            skinfit.load_fit(tmp_path / "bare.nc").save(tmp_path / "again.nc")
+    again = skinfit.load_fit(tmp_path / "again.nc")
+    assert "summary" not in again.attrs and not again.summary_stored
+    pd.testing.assert_frame_equal(again.summary(), ea_fit.summary(), check_exact=True)
+
+
 def test_a_stored_summary_is_never_shown_for_other_draws_or_records(ea_fit, tmp_path):
     """A file edited after its summary was stored (draws, warnings) or whose stored table is
     damaged shows the summary of what it now holds."""
