@@ -129,6 +129,30 @@ def test_report_files_and_self_contained(written):
             assert link[1:] in anchors, link
 
 
+def test_a_comparison_chart_is_kept_only_while_its_table_is_unchanged(written, ea_fit, rival, tmp_path):
+    """The report written again into its folder: the comparison chart is the same file (not
+    drawn again) for the same table, and drawn again for a table with another number."""
+    import shutil
+
+    index, comparison = written
+    out = tmp_path / "again"
+    shutil.copytree(index.parent, out)
+    chart = out / "figures" / "comparison.png"
+    manifest = json.loads((out / "figures" / ".figures.json").read_text())
+    stamp = chart.stat().st_mtime_ns
+    report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=comparison)
+    assert chart.stat().st_mtime_ns == stamp
+    assert json.loads((out / "figures" / ".figures.json").read_text()) == manifest
+    changed = comparison.copy()
+    changed.loc["electroadhesion_coulomb", "log_z"] = 490.5
+    report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=changed)
+    assert chart.stat().st_mtime_ns != stamp
+    after = json.loads((out / "figures" / ".figures.json").read_text())
+    assert after["comparison.png"] != manifest["comparison.png"]
+    assert {k: v for k, v in after.items() if k != "comparison.png"} == \
+        {k: v for k, v in manifest.items() if k != "comparison.png"}
+
+
 def test_failures_are_at_the_top(written, rival):
     index, _ = written
     page = _parse(index)
