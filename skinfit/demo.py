@@ -214,10 +214,13 @@ def _analyses(fits, plan, out, seed, echo):
             echo(f"\n{ds_id}: ranked by evidence\n"
                  + comparisons[ds_id][["log_z", "log_z_se", "log_bf_vs_best", "strength", "elpd_loo"]]
                  .to_string(float_format="{:.4g}".format))
+    for f, p in zip(fits.values(), plan):
+        if not f.summary_stored:  # saved before fits kept their summary table: keep it with the fit
+            f.save(_path(out, p))
     from .report_groups import group_analyses
 
     t0 = time.perf_counter()
-    populations, contrasts = group_analyses(fits, seed=seed, echo=echo)
+    populations, contrasts = group_analyses(fits, seed=seed, echo=echo, cache_dir=Path(report) / ".cache")
     if populations or contrasts:
         echo(f"\npopulation of {', '.join(populations) or 'none'} and {len(contrasts)} contrast table(s): "
              f"{time.perf_counter() - t0:.1f} s")

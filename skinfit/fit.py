@@ -32,24 +32,50 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
-# ArviZ's tree builder, imported here rather than where the tree is built: importing arviz_base
-# walks the call stack (lazy_loader's look-up of numpyro), which took 0.4 s from deep inside a
-# fit against 0.06 s here, before scipy.stats multiplies the modules it scans
-from arviz_base import from_dict
 
 from .data import Dataset, as_dataset
 from .labels import annotate
 from .units import si_unit
 from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
-from .optimize import find_map, laplace_covariance
-from .posterior import Posterior, _level_labels
-from .priors import PriorSet, load_priors
-from .proposal import MixtureT
 from .guardrails import check_run
-from .sampling import CHECK_EVERY, describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
+
+
+def _fitting():
+    """Import what fitting needs into this module (once): the optimiser, sampler, posterior,
+    priors and ArviZ's tree builder (scipy.stats, emcee, nlopt, arviz_base: ~1.5-2 s), which
+    reading and reporting a saved fit do without.  A name already set (a test's stand-in for
+    ``find_map``) is kept.  Called first thing by :func:`fit`: importing arviz_base walks the
+    call stack (lazy_loader's look-up of numpyro), which took 0.4 s from deep inside a fit
+    against 0.06 s near the top."""
+    g = globals()
+    if "run_emcee" in g:
+        return
+    from arviz_base import from_dict
+    from .optimize import find_map, laplace_covariance
+    from .posterior import Posterior, _level_labels
+    from .priors import PriorSet, load_priors
+    from .proposal import MixtureT
+    from .sampling import CHECK_EVERY, describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
+
+    for name, value in dict(locals()).items():
+        if name != "g":
+            g.setdefault(name, value)
+
+
+_FITTING_NAMES = ("from_dict", "find_map", "laplace_covariance", "Posterior", "_level_labels", "PriorSet",
+                  "load_priors", "MixtureT", "CHECK_EVERY", "describe_moves", "importance_start", "initial_ball",
+                  "run_emcee", "sampler_settings")
+
+
+def __getattr__(name):
+    """The names of :func:`_fitting` as attributes of this module, imported on first use."""
+    if name not in _FITTING_NAMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    _fitting()
+    return globals()[name]
 
 #: The groups of a fit's tree in ArviZ's order; the two of :data:`DEFERRED` are computed on
 #: first use.
@@ -132,6 +158,7 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         is 0 and ``sampling_s`` sums every run's sampling.
     """
     t_start = time.perf_counter()
+    _fitting()
     _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
                     checkpoint_every=checkpoint_every)
     model = model if isinstance(model, Model) else load_model(model)
@@ -219,6 +246,7 @@ def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
     the Laplace proposal and walkers drawn around the MAP.  Draws from ``rng`` in this order:
     the MAP's prior draws, the importance draws, then the walkers.
     """
+    _fitting()
     map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
     z_map = post.to_z(map_result.theta[None])[0]
     cov = laplace_covariance(post, z_map)
@@ -320,6 +348,7 @@ class _Deferred:
     def groups(self, post, every=1, walker_step=1):
         """The :data:`DEFERRED` groups as a DataTree, each variable (chain, draw, obs_id); with
         ``every`` or ``walker_step`` > 1 on those draws only (``chain`` / ``draw`` coordinates kept)."""
+        _fitting()
         ll, simulated = post.replicate(self.draws(every, walker_step), np.random.default_rng(self.seed))
         chains, kept = np.arange(self.nwalkers)[::walker_step], np.arange(self.ndraws)[::every]
         shape = (len(chains), len(kept), post.n)
@@ -491,10 +520,11 @@ class Fit:
     group, :meth:`summary`, :meth:`report_text` and the provenance properties do not.
     """
 
-    def __init__(self, idata, posterior=None, *, deferred=None):
+    def __init__(self, idata, posterior=None, *, deferred=None, stored=None):
         self._tree = idata
         self._posterior = posterior
         self._deferred = deferred
+        self._stored = stored  # a _StoredGroups: groups of DEFERRED still in the file (load_fit)
         self._summary = None  # (key, table) of the last summary(): see _summary_key
 
     @property
@@ -504,13 +534,23 @@ class Fit:
 
     @property
     def idata(self):
-        """The complete ArviZ DataTree (computes the deferred groups on first access)."""
+        """The complete ArviZ DataTree (computes the deferred groups on first access, or reads
+        them from the file of a loaded fit)."""
         return self.complete()._tree
+
+    @property
+    def partial_tree(self):
+        """The tree as held now: every group but, until computed or read, those of
+        :data:`DEFERRED`; never computes or reads them (content hashes, summaries)."""
+        return self._tree
 
     def complete(self) -> Fit:
         """Compute the deferred groups, if pending, and put them in the tree in ArviZ's order
-        (:data:`GROUPS`), with their time as ``pointwise_s`` in ``attr("timings")``; returns
-        the fit.  The root attributes are kept (e.g. an evidence already cached)."""
+        (:data:`GROUPS`), with their time as ``pointwise_s`` in ``attr("timings")``; for a
+        loaded fit, read them from its file.  Returns the fit.  The root attributes are kept
+        (e.g. an evidence already cached)."""
+        if self._stored is not None:
+            self._tree, self._stored = self._stored.read(self._tree), None
         if self._deferred is None:
             return self
         t0 = time.perf_counter()
@@ -607,25 +647,75 @@ class Fit:
         which the forces determine only through tau0*beta0 and tau0*phi).
 
         Computed once per content (a copy returned): a report asks for it several times a fit.
+        :meth:`save` stores it in the file (root attribute ``summary``, with the sha256 of what
+        it was computed from, :meth:`_summary_key`), and a loaded fit whose draws, warnings and
+        records still have that hash shows the stored table (the same numbers) without
+        computing it again, nor importing arviz_stats and scipy.stats; after any edit of those
+        it is computed afresh.
         """
         key = self._summary_key()
         if self._summary is not None and self._summary[0] == key:
             return self._summary[1].copy()
-        table = self._compute_summary()
+        table = _summary_from_attr(self._tree.attrs.get(SUMMARY_ATTR), key, self._slot_names())
+        if table is None:
+            table = self._compute_summary()
+        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.guardrails, skinfit.misfit)
         self._summary = (key, table)
         return table.copy()
 
-    def _summary_key(self):
-        """What :meth:`summary` is computed from: the posterior and derived draws (hashed, ~1 ms
-        a MB) and the warnings it shows."""
+    def content_hash(self):
+        """sha256 of the fit's content but what is computed from it: the arrays of every group
+        but those of :data:`DEFERRED` (pointwise log-likelihood and predictive draws, up to
+        200 MB, functions of the posterior and the seeds in the attributes; never computed or
+        read for this), and the root attributes but :data:`CACHED_ATTRS` (evidence, LOO and
+        the stored summary, which a comparison or a save adds to a file).  Keys the report's
+        figures and the population cache."""
         import hashlib
 
-        h = hashlib.sha256(self._tree.attrs.get("warnings", "").encode())
+        h = hashlib.sha256()
+        tree = self._tree
+        for name in sorted(set(tree.children) - set(DEFERRED)):
+            ds = tree[name].to_dataset()
+            for var in sorted(ds.variables):
+                values = ds[var].values
+                h.update(f"{name}/{var}{values.shape}".encode())
+                # text as text: a fit in memory holds str objects where its file gives '<U' arrays
+                h.update(repr([str(v) for v in values.ravel().tolist()]).encode() if values.dtype.kind in "OUS"
+                         else np.ascontiguousarray(values).tobytes())
+        attrs = {k: v for k, v in tree.attrs.items() if k not in CACHED_ATTRS}
+        h.update(json.dumps(attrs, sort_keys=True, default=_plain_json).encode())
+        return h.hexdigest()
+
+    @property
+    def summary_stored(self):
+        """True when the root attributes hold this fit's summary table for its current content
+        (:meth:`summary` then reads it instead of computing it)."""
+        return _summary_from_attr(self._tree.attrs.get(SUMMARY_ATTR), self._summary_key(),
+                                  self._slot_names()) is not None
+
+    def _slot_names(self):
+        return [s["name"] for s in self.attr("slots")]
+
+    def _summary_key(self):
+        """sha256 of all :meth:`summary` is computed from: the posterior and derived draws with
+        their dimensions, level coordinates and units (hashed, ~1 ms a MB), and the root
+        attributes it reads (warnings, MAP, sampler record, slots, prior file, derived
+        quantities), with the table's format version :data:`SUMMARY_FORMAT`."""
+        import hashlib
+
+        attrs = self._tree.attrs
+        h = hashlib.sha256(f"skinfit summary {SUMMARY_FORMAT}".encode())
+        for key in ("warnings", "map", "sampler", "slots", "priors_text", "derived"):
+            h.update(f"\0{key}\0{attrs.get(key, '')}".encode())
         for group in ("posterior", "derived"):
             if group in self._tree.children:
-                for name, da in sorted(self._tree[group].data_vars.items()):
-                    h.update(name.encode())
+                ds = self._tree[group].to_dataset()
+                for name, da in sorted(ds.data_vars.items()):
+                    h.update(f"\0{group}/{name}{da.dims}{da.shape}{da.dtype}{da.attrs.get('units', '')}".encode())
                     h.update(np.ascontiguousarray(da.values).tobytes())
+                    for dim in da.dims:
+                        if dim not in ("chain", "draw") and dim in ds.coords:
+                            h.update(repr(ds[dim].values.tolist()).encode())
         return h.hexdigest()
 
     def _compute_summary(self):
@@ -662,10 +752,7 @@ class Fit:
         table["note"] = notes
         table = pd.concat([table, _derived_summary(self._tree)])
         table["unit"] = [self._unit(n) for n in table.index]
-        table = table[["unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
-                       "contraction", "note"]]
-        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.guardrails, skinfit.misfit)
-        return table
+        return table[list(SUMMARY_COLUMNS)]
 
     def _unit(self, name):
         """SI unit of a summary row (``E_star``, ``alpha[75]``, a derived quantity), from the
@@ -724,6 +811,12 @@ class Fit:
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
         # is an OSError with the previous file in place
         tree = self.idata
+        try:
+            tree.attrs[SUMMARY_ATTR] = _summary_to_attr(self.summary(), self._summary_key())
+        except Exception as exc:  # noqa: BLE001 - the summary is only kept to save time: the fit is saved without it
+            tree.attrs.pop(SUMMARY_ATTR, None)
+            warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
+                          f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)
         dask = sys.modules.get("dask")  # in a Dask worker xarray would take a distributed lock named by the target
         with (dask.config.set(scheduler="synchronous") if dask is not None else nullcontext()), \
                 _distributed_unimported():
@@ -776,6 +869,17 @@ def _distributed_unimported():
             del sys.modules["distributed"]
 
 
+def as_fit(obj) -> Fit:
+    """A :class:`Fit` from a Fit, its DataTree or the path of a saved fit (:func:`load_fit`)."""
+    if isinstance(obj, Fit):
+        return obj
+    if isinstance(obj, (str, os.PathLike)):
+        return load_fit(obj)
+    if "model_id" in getattr(obj, "attrs", {}):
+        return Fit(obj)
+    raise TypeError(f"expected a skinfit Fit, its DataTree or a path to fit.nc (got {type(obj).__name__})")
+
+
 def fit_file(path) -> Path:
     """The file of a saved fit: ``path`` itself, or ``path/fit.nc`` for a run directory."""
     path = Path(path)
@@ -787,15 +891,129 @@ def fit_file(path) -> Path:
 
 
 def load_fit(path: str | os.PathLike) -> Fit:
-    """Load a fit saved by :meth:`Fit.save`."""
+    """Load a fit saved by :meth:`Fit.save`.
+
+    The groups of :data:`DEFERRED` (pointwise log-likelihood and predictive draws, most of a
+    file) are read when first used (:attr:`Fit.idata`, :meth:`Fit.group`, :meth:`Fit.complete`),
+    from the same file: if it has been replaced or changed meanwhile, that read raises
+    InputError rather than mix two results.  Groups are read with h5netcdf and decoded by
+    xarray's CF decoding (the same tree as ``xarray.open_datatree``, in ~60% of its time); a
+    file of another layout (nested groups, variables at the root) is read by
+    ``xarray.open_datatree`` whole."""
     path = fit_file(path)
     try:
-        tree = xr.open_datatree(path)  # = arviz.from_netcdf, without importing arviz-plots
-    except (OSError, ValueError) as exc:
+        stored = _StoredGroups(path)
+        tree = stored.read_light()
+    except (OSError, ValueError, KeyError) as exc:
         raise InputError(path, f"not a readable skinfit result ({exc})") from None
     if "model_id" not in tree.attrs:
         raise InputError(path, "not a skinfit result (no model_id attribute)")
-    return Fit(tree.load())
+    return Fit(tree, stored=stored if stored.names else None)
+
+
+class _StoredGroups:
+    """The groups of :data:`DEFERRED` of a saved fit, left in its file until first used; the
+    file is identified by device, inode, size and modification time when first read."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.identity = self._identity()
+        self.names = []
+        self.order = []
+
+    def _identity(self):
+        st = os.stat(self.path)
+        return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+    def read_light(self):
+        """The tree without the groups of :data:`DEFERRED` (listed in ``names``)."""
+        import h5netcdf
+
+        with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
+            order = list(h.groups)  # names only: a group's metadata is read when it is opened
+            light = {g: h.groups[g] for g in order if g not in DEFERRED}
+            if h.variables or any(g.groups for g in light.values()):
+                return xr.open_datatree(self.path, engine="h5netcdf").load()  # not Fit.save's layout
+            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
+            nodes = {g: _decoded(group) for g, group in light.items()}
+        self.order, self.names = order, [g for g in order if g in DEFERRED]
+        return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
+
+    def read(self, tree):
+        """``tree`` with the groups of ``names`` read from the file, in the file's order."""
+        import h5netcdf
+
+        try:
+            same = self._identity() == self.identity
+        except OSError:
+            same = False
+        if not same:
+            raise InputError(self.path, "changed or removed since the fit was loaded: load it again "
+                                        "(its pointwise log-likelihood and predictive draws are read on first use)")
+        with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
+            groups = {g: h.groups[g] for g in self.names}
+            if any(group.groups for group in groups.values()):
+                raise InputError(self.path, f"groups inside {', '.join(g for g in groups if groups[g].groups)}: "
+                                            "not a fit file skinfit writes")
+            extra = {g: _decoded(group) for g, group in groups.items()}
+        nodes = {n: tree[n].to_dataset(inherit=False) for n in tree.children} | extra
+        order = [g for g in self.order if g in nodes] + [g for g in nodes if g not in self.order]
+        return xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)} | {n: nodes[n] for n in order})
+
+
+def _decoded(group):
+    """One h5netcdf group as an xarray Dataset, decoded as ``xarray.open_dataset`` decodes it."""
+    variables = {k: xr.Variable(v.dimensions, v[...], attrs=dict(v.attrs)) for k, v in group.variables.items()}
+    attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in group.attrs.items()}
+    return xr.decode_cf(xr.Dataset(variables, attrs=attrs))
+
+
+#: Root attribute holding a fit's summary table (:meth:`Fit.summary`), and the table's format:
+#: raise it when the table's columns or their computation change, so older stored tables are
+#: computed again.
+SUMMARY_ATTR = "summary"
+SUMMARY_FORMAT = 1
+SUMMARY_COLUMNS = ("unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
+                   "contraction", "note")
+#: Root attributes a saved fit may gain without its draws or records changing (evidence and LOO
+#: by a comparison, the stored summary): left out of content hashes such as the report's
+#: figure cache (:func:`skinfit.report.fit_hash`).
+CACHED_ATTRS = ("evidence", "loo", SUMMARY_ATTR)
+
+
+def _plain_json(value):
+    """JSON default: numpy scalars and arrays as the Python values a fit in memory holds
+    (a loaded fit's integer attributes are numpy integers)."""
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    return str(value)
+
+
+def _summary_to_attr(table, key):
+    """The summary table as JSON text, with the sha256 ``key`` of its inputs; floats as
+    Python writes them (repr: exact round trip), NaN as NaN."""
+    columns = [{"name": c, "dtype": str(table[c].dtype), "values": table[c].tolist()} for c in table.columns]
+    return json.dumps({"key": key, "index": [str(i) for i in table.index], "columns": columns})
+
+
+def _summary_from_attr(text, key, slots):
+    """The table stored by :func:`_summary_to_attr` when its key is ``key`` and it has the
+    columns of :data:`SUMMARY_COLUMNS` and a row for each of ``slots`` (the sampled parameters'
+    names), a value per row in each column; None when absent, of other inputs, or damaged
+    (then it is computed again, and the next save rewrites it)."""
+    if not isinstance(text, str) or not text:
+        return None
+    try:
+        doc = json.loads(text)
+        index, columns = doc["index"], doc["columns"]
+        if (doc.get("key") != key or [c["name"] for c in columns] != list(SUMMARY_COLUMNS)
+                or not set(slots) <= set(index) or len(set(index)) != len(index)
+                or any(len(c["values"]) != len(index) for c in columns)):
+            return None
+        return pd.DataFrame({c["name"]: pd.Series(c["values"], dtype=c["dtype"], index=index) for c in columns},
+                            index=index)
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return None
 
 
 def _slot_name(label):
@@ -823,6 +1041,7 @@ def _priors_from_attrs(attrs):
 
 def rebuild_posterior(tree):
     """Reconstruct the Posterior of a saved fit from its own records (cards as saved)."""
+    _fitting()
     from types import MappingProxyType
 
     from .data import Column

@@ -36,7 +36,6 @@ from .data import Dataset, load_dataset
 from .errors import InputError
 from .fit import fit, load_fit
 from .models import Model, load_model
-from .posterior import _level_labels
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside",
            "record_source", "source_problem", "data_drift"]
@@ -72,6 +71,8 @@ def group_labels(dataset, by, where="--by"):
         if c not in frame.columns:
             raise InputError(where, f"no column {c!r} in {dataset.path} (columns: "
                              f"{', '.join(frame.columns)}; declared groups: {', '.join(dataset.groups) or 'none'})")
+    from .posterior import _level_labels
+
     parts = [[f"{c}={v}" for v in _level_labels(frame, [c], dataset)] for c in by]
     labels = [",".join(t) for t in zip(*parts)]
     return labels, list(dict.fromkeys(labels))

@@ -1,10 +1,32 @@
 """Units and long names of every variable of a fit's result tree (CF-style ``units`` and
 ``long_name`` attrs): parameters and data in the SI units they are stored in."""
 
-from .posterior import noise_suffix
+import json
+import tomllib
+
 from .units import si_unit
 
-__all__ = ["variable_attrs", "annotate"]
+__all__ = ["variable_attrs", "annotate", "noise_suffix", "parameter_units"]
+
+
+def noise_suffix(observables, obs):
+    """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
+    return "" if len(observables) == 1 else f"_{obs}"
+
+
+def parameter_units(fit):
+    """Parameter (or noise parameter) name -> SI unit as stated in the model card, from a
+    fit's root attributes (``fit.attrs``: ``model_card``, ``setup``)."""
+    card = tomllib.loads(fit.attrs["model_card"])
+    units = {p["name"]: p["unit"] for p in card.get("parameters", [])}
+    obs_units = {o["name"]: o["unit"] for o in card.get("observables", [])}
+    setup = json.loads(fit.attrs["setup"])
+    observables = setup["observables"]
+    for o in observables:
+        suffix = noise_suffix(observables, o)
+        units[f"sigma{suffix}"] = "1" if setup["noise"].get(o) == "lognormal" else obs_units.get(o, "1")
+        units[f"nu{suffix}"] = "1"
+    return units
 
 
 def variable_attrs(post):

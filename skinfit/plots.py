@@ -46,7 +46,6 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from .errors import InputError
-from .posterior import noise_suffix
 from .units import to_si
 
 __all__ = ["plot_ppc", "ppc_bands", "plot_spec", "plot_pair", "plot_trace", "plot_rank",
@@ -82,15 +81,9 @@ def _ensure_backend():
 
 # ---- reading a saved fit ------------------------------------------------------------------
 def _as_fit(obj):
-    from .fit import Fit, load_fit
+    from .fit import as_fit
 
-    if isinstance(obj, Fit):
-        return obj
-    if isinstance(obj, (str, Path)):
-        return load_fit(obj)
-    if hasattr(obj, "attrs") and "model_id" in getattr(obj, "attrs", {}):
-        return Fit(obj)
-    raise TypeError(f"expected a skinfit Fit, its DataTree or a path to fit.nc (got {type(obj).__name__})")
+    return as_fit(obj)
 
 
 def _card(fit):
@@ -125,17 +118,9 @@ def _unit_text(unit):
 
 def parameter_units(fit):
     """Parameter (or noise parameter) name -> SI unit as stated in the model card."""
-    fit = _as_fit(fit)
-    card = _card(fit)
-    units = {p["name"]: p["unit"] for p in card.get("parameters", [])}
-    obs_units = {o["name"]: o["unit"] for o in card.get("observables", [])}
-    setup = fit.attr("setup")
-    observables = setup["observables"]
-    for o in observables:
-        suffix = noise_suffix(observables, o)
-        units[f"sigma{suffix}"] = "1" if setup["noise"].get(o) == "lognormal" else obs_units.get(o, "1")
-        units[f"nu{suffix}"] = "1"
-    return units
+    from .labels import parameter_units as units
+
+    return units(_as_fit(fit))
 
 
 def _slots(fit):

@@ -51,7 +51,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import InputError
-from .fit import Fit, _priors_from_attrs, _slot_values, as_generator
+from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator
 from .hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 
 __all__ = ["population", "PopulationResult", "PopulationWarning", "population_tables", "load_population",
@@ -504,7 +504,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
                *, family: str | Mapping[str, str] | None = None, correlated: bool = False, method: str = "gibbs",
                rng: int | np.random.Generator | None = None, model: str | None = None, chains: int = 8,
                ess_target: float = 400, rhat_max: float = 1.01, max_sweeps: int = 20000, burn: int = 300,
-               min_contraction: float = 0.5, n_draws: int = 1000, max_steps: int = 20000) -> PopulationResult:
+               min_contraction: float = 0.5, n_draws: int = 1000, max_steps: int = 20000,
+               cache: str | os.PathLike | None = None) -> PopulationResult:
     """Infer the population distribution of ``parameters`` from separate per-subject fits.
 
     Parameters
@@ -528,13 +529,31 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         burn-in.
     min_contraction : float
         Warn for subjects whose own fit contracted a population parameter's prior by less.
+    cache : path-like, optional
+        A file that keeps the result (NumPy ``.npz``, written atomically) with the sha256 of
+        its inputs: every subject's label and fit content (:meth:`~skinfit.fit.Fit.content_hash`),
+        the arguments above, the seed (an int ``rng`` only) and the code of skinfit and the
+        versions of numpy and scipy.  A call with the same inputs reads the same result from
+        it instead of sampling (its warnings are warned again); other inputs, or an unreadable
+        file, sample and rewrite it.
 
     Returns
     -------
     PopulationResult
     """
-    rng = as_generator(rng)
+    seed, rng = rng, as_generator(rng)
     fits = _as_fits(fits, model)
+    key = None
+    if cache is not None and isinstance(seed, (int, np.integer)) and all(isinstance(f, Fit) for f in fits.values()):
+        key = _cache_key(fits, {"parameters": parameters, "family": family, "correlated": correlated,
+                                "method": method, "seed": int(seed), "chains": chains, "ess_target": ess_target,
+                                "rhat_max": rhat_max, "max_sweeps": max_sweeps, "burn": burn,
+                                "min_contraction": min_contraction, "n_draws": n_draws, "max_steps": max_steps})
+        result = _read_cache(cache, key)
+        if result is not None:
+            for w in result.warnings:
+                warnings.warn(w, PopulationWarning, stacklevel=2)
+            return result
     subjects = list(fits)
     first = fits[subjects[0]]
     parameters, fams, logs, slots, priors = _choose(first, parameters, family)
@@ -622,7 +641,63 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
                         f"(contraction < {min_contraction:g}): their shrunk {n} is mostly the population's")
     for w in warn:
         warnings.warn(w, PopulationWarning, stacklevel=2)
+    if key is not None:
+        _write_cache(cache, key, result)
     return result
+
+
+# ---- the result kept by its inputs (population(cache=...)) -------------------------------
+def _cache_key(fits, settings):
+    """sha256 of a population's inputs: subjects (label, fit content), settings, skinfit's code
+    (every module of the package) and the numpy and scipy versions."""
+    import hashlib
+    from importlib import metadata
+
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.rglob("*.py")):
+        h.update(path.read_bytes())
+    doc = {"format": 1, "subjects": [[label, f.content_hash()] for label, f in fits.items()],
+           "settings": settings, "versions": [metadata.version("numpy"), metadata.version("scipy")]}
+    h.update(json.dumps(doc, sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
+def _write_cache(path, key, result):
+    """Write ``result`` with its input ``key`` into ``path`` (npz, no pickle), atomically."""
+    import io
+
+    from .checkpoint import replace_atomic
+
+    meta = {"key": key, "model_id": result.model_id, "parameters": result.parameters, "families": result.families,
+            "subjects": result.subjects, "hyperpriors": result.hyperpriors, "sampler": result.sampler,
+            "warnings": result.warnings, "contraction": result.contraction, "corr": result.corr is not None}
+    arrays = {"mu": result.mu, "sd": result.sd, "shrunk": result.shrunk,
+              **({"corr": result.corr} if result.corr is not None else {}),
+              **{f"separate_{i}": result.separate[s] for i, s in enumerate(result.subjects)}}
+    buf = io.BytesIO()
+    np.savez(buf, meta=np.array(json.dumps(meta, default=_plain_json)), **arrays)
+    replace_atomic(path, buf.getvalue())
+
+
+def _read_cache(path, key):
+    """The result kept in ``path`` for input ``key``; None when absent, of other inputs or
+    unreadable (a partial or corrupt file: sampled again and rewritten)."""
+    import zipfile
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("key") != key:
+                return None
+            hyper = dict(meta["hyperpriors"])
+            if "_bounds" in hyper:
+                hyper["_bounds"] = {k: tuple(v) for k, v in hyper["_bounds"].items()}
+            return PopulationResult(meta["model_id"], meta["parameters"], meta["families"], meta["subjects"],
+                                    z["mu"], z["sd"], z["corr"] if meta["corr"] else None, z["shrunk"],
+                                    {s: z[f"separate_{i}"] for i, s in enumerate(meta["subjects"])}, hyper,
+                                    meta["sampler"], meta["warnings"], meta["contraction"])
+    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
+        return None
 
 
 # ---- importance reweighting of the separate fits (method="reweight") ---------------------
@@ -772,11 +847,12 @@ def cli_population(args):
     params = None
     if args.params:
         params = [p for item in args.params for p in item.split(",") if p]
+    out = Path(args.out) if args.out else Path(args.run) / "population"
     with warnings.catch_warnings():  # the warnings are printed below, with the result
         warnings.simplefilter("ignore", PopulationWarning)
         result = population(args.run, params, family=_parse_family(args.family), correlated=args.correlated,
-                            method=args.method, rng=args.seed, model=args.model)
-    out = Path(args.out) if args.out else Path(args.run) / "population"
+                            method=args.method, rng=args.seed, model=args.model,
+                            cache=out / ".cache" / "population.npz")
     out.mkdir(parents=True, exist_ok=True)
     tables = population_tables(result)
     path = result.save(out / "population.nc")

@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import special
 
+from .labels import noise_suffix  # noqa: F401  (here for its old importers)
 from .units import to_si
 
 from .errors import InputError
@@ -22,11 +23,6 @@ from .priors import _LOGPDF
 __all__ = ["Posterior", "Slot", "noise_parameter_names"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-def noise_suffix(observables, obs):
-    """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
-    return "" if len(observables) == 1 else f"_{obs}"
 
 
 def noise_parameter_names(observables, noise):

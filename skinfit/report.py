@@ -8,6 +8,7 @@ Every section names the model card, prior file and dataset (with hashes) and the
 version that produced it. Reads only saved results.
 """
 
+import hashlib
 import json
 import math
 import re
@@ -18,25 +19,43 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import plots
 from .errors import InputError
-from .fit import _wall_time_text
+from .fit import _wall_time_text, as_fit
+from .labels import parameter_units
 from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report"]
+
+
+def _lazy_module(name):
+    """Module ``name``, executed on first attribute access (importlib's LazyLoader): the
+    plotting module and matplotlib (~0.6 s) are imported only when a figure is drawn."""
+    import importlib.util
+
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+plots = _lazy_module("skinfit.plots")
 
 #: Thresholds of the warnings at the top of a report.
 MIN_ACCEPTANCE_MEAN = 0.1
 MAX_OUTSIDE_SUPPORT = 0.05  # share of log-density evaluations
 MAX_RHAT = 1.05  # over walkers: a secondary check
 
-_FIGURES = (
-    ("ppc", plots.plot_ppc, "Posterior predictive: the data over the 50% and 90% posterior-predictive "
-                            "bands and the posterior median curve, in the units the data came in"),
-    ("prior_posterior", plots.plot_prior_posterior, "Prior (line) against posterior (filled) per parameter: "
-                                                    "what the data determined"),
-    ("pair", plots.plot_pair, "Pairwise posterior draws and marginals (corner plot); MAP in red"),
-    ("trace", plots.plot_trace, "Walker traces and rank histograms by walker group"),
+_FIGURES = (  # (file name, skinfit.plots function, caption)
+    ("ppc", "plot_ppc", "Posterior predictive: the data over the 50% and 90% posterior-predictive "
+                        "bands and the posterior median curve, in the units the data came in"),
+    ("prior_posterior", "plot_prior_posterior", "Prior (line) against posterior (filled) per parameter: "
+                                                "what the data determined"),
+    ("pair", "plot_pair", "Pairwise posterior draws and marginals (corner plot); MAP in red"),
+    ("trace", "plot_trace", "Walker traces and rank histograms by walker group"),
 )
 
 
@@ -120,7 +139,7 @@ def fit_diagnostics(fit, summary=None):
     ``value, criterion, status`` (status ``ok``, ``info``, ``WARN`` or ``FAIL``); ``issues``
     a list of ``(status, message)`` for every WARN and FAIL.
     """
-    fit = plots._as_fit(fit)
+    fit = as_fit(fit)
     summary = fit.summary() if summary is None else summary
     s = fit.attr("sampler")
     c = fit.attr("support_counts")
@@ -220,7 +239,7 @@ def _provenance_line(p):
 # ---- the report -----------------------------------------------------------------------------
 def _as_fits(fits):
     if isinstance(fits, dict):
-        items = [(str(k), plots._as_fit(v)) for k, v in fits.items()]
+        items = [(str(k), as_fit(v)) for k, v in fits.items()]
         taken, out = set(), []
         for name, f in items:
             key = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_.") or "fit"
@@ -231,7 +250,7 @@ def _as_fits(fits):
         return out
     from .run_labels import run_labels
 
-    fits = [plots._as_fit(f) for f in ([fits] if not isinstance(fits, (list, tuple)) else fits)]
+    fits = [as_fit(f) for f in ([fits] if not isinstance(fits, (list, tuple)) else fits)]
     taken = set()
     return [(_key(f, taken, label), f) for f, label in zip(fits, run_labels(fits, number_identical=False))]
 
@@ -270,32 +289,16 @@ _FITS, _JOBS = [], []  # the fits and figure jobs being drawn, inherited by fork
 
 
 def fit_hash(fit):
-    """sha256 of what a fit's figures are drawn from: the arrays of every group but the two
-    computed from the posterior and the seeds in the attributes (pointwise log-likelihood and
-    predictive draws, up to 200 MB), and the root attributes but ``evidence`` and ``loo``
-    (which a comparison adds to a saved file without changing a figure)."""
-    import hashlib
-
-    from .fit import DEFERRED
-
-    h = hashlib.sha256()
-    tree = fit.idata
-    for name in sorted(set(tree.children) - set(DEFERRED)):
-        ds = tree[name].to_dataset()
-        for var in sorted(ds.variables):
-            h.update(f"{name}/{var}".encode())
-            h.update(np.ascontiguousarray(ds[var].values).tobytes() if ds[var].dtype != object
-                     else repr(ds[var].values.tolist()).encode())
-    attrs = {k: v for k, v in tree.attrs.items() if k not in ("evidence", "loo")}
-    h.update(json.dumps(attrs, sort_keys=True, default=str).encode())
-    return h.hexdigest()
+    """sha256 of what a fit's figures are drawn from (:meth:`skinfit.fit.Fit.content_hash`)."""
+    return fit.content_hash()
 
 
 def _code_key(func):
     """What draws a figure: the package source and plotting libraries' versions
-    (:func:`skinfit.figure_store.code_hash`) and the plot function's own code as it is now
-    in this process (a replaced function draws again)."""
-    import hashlib
+    (:func:`skinfit.figure_store.code_hash`) and, when ``skinfit.plots.<func>`` is not skinfit's
+    own function (a test's or a user's replacement), that function's code: a replaced plot
+    draws again. Does not import skinfit.plots (nothing is replaced in a module not loaded)."""
+    import types
 
     from .figure_store import code_hash
 
@@ -303,9 +306,14 @@ def _code_key(func):
         consts = [text(c) if hasattr(c, "co_code") else repr(c) for c in code.co_consts]
         return repr((code.co_code, code.co_names, code.co_varnames, consts))
 
-    f = getattr(plots, func)
-    own = text(f.__code__) if hasattr(f, "__code__") else repr(f)
-    return f"{code_hash()[:16]}.{hashlib.sha256(own.encode()).hexdigest()[:16]}"
+    own = ""
+    module = sys.modules.get("skinfit.plots")
+    if type(module) is types.ModuleType:  # loaded (the lazy module is a subclass until then)
+        f = getattr(module, func)
+        if getattr(f, "__module__", None) != "skinfit.plots" or getattr(f, "__qualname__", None) != func:
+            own = "." + hashlib.sha256((text(f.__code__) if hasattr(f, "__code__") else repr(f)).encode()
+                                       ).hexdigest()[:16]
+    return f"{code_hash()[:16]}{own}"
 
 
 def _job_fits(job):
@@ -339,7 +347,6 @@ def render_figures(fits, jobs, figdir, workers=None):
     unavailable; at most ``workers``), costliest first, unless :mod:`skinfit.figure_store`
     holds them from an earlier drawing of the same content. Returns one error text or None
     per job."""
-    import hashlib
     import multiprocessing
     import os
     from concurrent.futures import ProcessPoolExecutor
@@ -347,11 +354,7 @@ def render_figures(fits, jobs, figdir, workers=None):
     from . import figure_store
 
     global _FITS, _JOBS
-    manifest_path = figdir / ".figures.json"
-    try:
-        manifest = json.loads(manifest_path.read_text())
-    except (OSError, ValueError):
-        manifest = {}
+    manifest = _manifest(figdir)
     hashes, storable = {}, {}
 
     def content(i):
@@ -390,7 +393,8 @@ def render_figures(fits, jobs, figdir, workers=None):
                                                  else [jobs[j]["fit"]])}:
                 fits[i].complete()  # each worker draws from the complete tree, computed once here
                 fits[i].summary()  # and from its summary, inherited
-            import matplotlib.backends.backend_pdf  # noqa: F401  imported once, before the fork
+            plots._DPI  # noqa: B018  the plotting module and matplotlib imported once, before the fork
+            import matplotlib.backends.backend_pdf  # noqa: F401
             import PIL.PngImagePlugin  # noqa: F401
 
             with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
@@ -412,8 +416,24 @@ def render_figures(fits, jobs, figdir, workers=None):
             manifest[jobs[i]["path"].name] = keys[i]
         else:
             manifest.pop(jobs[i]["path"].name, None)
-    manifest_path.write_text(json.dumps(manifest, indent=0, sort_keys=True))
+    _write_manifest(figdir, manifest)
     return errors
+
+
+def _manifest(figdir):
+    """Figure file name -> the key of what it was drawn from (``figdir/.figures.json``); an
+    unreadable manifest is empty (every figure drawn again)."""
+    try:
+        manifest = json.loads((figdir / ".figures.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return manifest if isinstance(manifest, dict) else {}
+
+
+def _write_manifest(figdir, manifest):
+    from .checkpoint import replace_atomic
+
+    replace_atomic(figdir / ".figures.json", json.dumps(manifest, indent=0, sort_keys=True).encode())
 
 
 def _write_png(fig, path):
@@ -446,7 +466,7 @@ def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
         path = figdir / f"{key}_{name}.png"
         entry = {"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
                  "pdf": f"figures/{path.stem}.pdf"}
-        jobs.append({"fit": index, "func": make.__name__, "args": (), "path": path, "entry": entry})
+        jobs.append({"fit": index, "func": make, "args": (), "path": path, "entry": entry})
     for pname, dims in _split_parameters(fit).items():
         path = figdir / f"{key}_forest_{pname}.png"
         entry = {"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
@@ -525,12 +545,13 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     # two runs of one model on one dataset: named by the options that differ
     labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items], number_identical=False)))
     for key, fit in items:
-        fit.complete()  # its predictive checks need the deferred groups; the diagnostics then give their time
+        if fit.pending:  # its checks of the fit to the data need the deferred groups; the diagnostics give their time
+            fit.complete()
         summary = fit.summary()
         diag, issues = fit_diagnostics(fit, summary)
         summary.to_csv(out / f"{key}_summary.csv")
         diag.to_csv(out / f"{key}_diagnostics.csv")
-        units = plots.parameter_units(fit)
+        units = parameter_units(fit)
         shown = summary.drop(columns="unit", errors="ignore")
         shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
         shown.index = [level_names(fit).get(n, n) for n in shown.index]
@@ -567,7 +588,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         shown.to_csv(out / f"{stem}.csv", index=False)
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
                                 "table": _table(shown.head(20).set_index("A"), "A")})
-    comparisons = []
+    comparisons, manifest = [], _manifest(figdir)  # a comparison chart is kept while its table is the same
     tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
     for name, table in tables.items():
         stem = "comparison" + (f"_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}" if name else "")
@@ -575,20 +596,29 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
                  "csv": f"{stem}.csv", "figure": None, "note": ranking_note(table)}
         path = figdir / f"{stem}.png"
-        error = _figure(lambda table=table: plots.plot_comparison(table), path)
+        key = f"plot_comparison:{hashlib.sha256(table.to_csv().encode()).hexdigest()}:{_code_key('plot_comparison')}"
+        drawn = manifest.get(path.name) == key and path.exists() and path.with_suffix(".pdf").exists()
+        error = None if drawn else _figure(lambda table=table: plots.plot_comparison(table), path)
+        if error:
+            manifest.pop(path.name, None)
+        elif not drawn:
+            manifest[path.name] = key
         if error:
             issues_all.append({"status": "WARN", "fit": "", "where": "model comparison", "text": error})
         else:
             entry["figure"] = {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}
         comparisons.append(entry)
+    if comparisons:
+        _write_manifest(figdir, manifest)
 
-    from markupsafe import Markup
+    design_sections = []
+    if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
+        from markupsafe import Markup
 
-    from .design import design_section_html
+        from .design import design_section_html
 
-    # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
-    design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id,
-                        "html": Markup(design_section_html(d, figdir))} for d in designs]
+        design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id,
+                            "html": Markup(design_section_html(d, figdir))} for d in designs]
     issues_all.sort(key=lambda i: i["status"] != "FAIL")  # failures first, then warnings (stable)
     n_fail = sum(i["status"] == "FAIL" for i in issues_all)
     context = {"title": title or "skinfit report", "version": __version__, "sections": sections,
@@ -762,15 +792,17 @@ def _collect_runs(paths):
 
 def _comparisons(fits):
     """Evidence/LOO tables for fits of different models on the same data, if skinfit.compare exists."""
+    groups = {}
+    for key, f in fits:
+        groups.setdefault(f.attrs["dataset_sha256"], []).append((key, f))
+    if all(len({f.model_id for _, f in group}) < 2 for group in groups.values()):
+        return None
     try:
         from .compare import compare
     except ImportError as exc:
         if exc.name != "skinfit.compare":  # present but broken: say so, the report goes on
             print(f"skinfit report: no model comparison ({exc})", file=sys.stderr)
         return None
-    groups = {}
-    for key, f in fits:
-        groups.setdefault(f.attrs["dataset_sha256"], []).append((key, f))
     tables = {}
     for group in groups.values():
         if len({f.model_id for _, f in group}) < 2:
@@ -798,16 +830,19 @@ def cli_report(args):
     from .groups import data_drift
     from .report_groups import group_analyses
 
-    from .design import load_design
+    designs = [p for p in args.runs if (Path(p) / "design.json").is_file()]
+    if designs:
+        from .design import load_design
 
-    designs = [load_design(p) for p in args.runs if (Path(p) / "design.json").is_file()]
+        designs = [load_design(p) for p in designs]
     runs = _collect_runs([p for p in args.runs if not (Path(p) / "design.json").is_file()])
     fits = [load_fit(p) for p in runs]
     for message in data_drift(list(zip(runs, fits))):  # never a stale result unannounced
         print(f"skinfit report: warning: {message}", file=sys.stderr)
     items = _as_fits(fits)
     comparison = _comparisons(items)
-    populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr))
+    populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
+                                            cache_dir=Path(args.out) / ".cache")
     index = write_report(dict(items), args.out, comparison=comparison, populations=populations,
                          contrasts=contrasts, designs=designs)
     if getattr(args, "json", False):

@@ -9,6 +9,7 @@ Each section returns plain dicts of tables and figure jobs for :mod:`skinfit.rep
 """
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -151,7 +152,7 @@ def contrast_section(table, top=None):
     return t.head(top) if top else t
 
 
-def group_analyses(fits, *, seed=0, min_fits=3, echo=None):
+def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None):
     """Population results and contrasts for the fits of a ``--by`` run or a campaign.
 
     ``fits``: {key: Fit}. For each model with at least ``min_fits`` fits on groups of one
@@ -160,6 +161,10 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None):
     pairwise contrasts between subjects of those parameters; for every fit with a parameter
     split by a condition, the contrasts between its levels. A failing step is reported
     through ``echo`` and left out, never a partial table.
+
+    ``cache_dir``: where each population is kept by the content of its inputs
+    (:func:`skinfit.population.population`'s ``cache``), so a report of the same fits does
+    not sample it again.
 
     Returns ``(populations {model id: result}, contrasts {title: DataFrame})``.
     """
@@ -183,7 +188,9 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None):
 
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                populations[model_id] = population(group, names, rng=seed)
+                cache = None if cache_dir is None else \
+                    Path(cache_dir) / f"population_{re.sub(r'[^A-Za-z0-9_.-]+', '_', f'{model_id}__{base}')}.npz"
+                populations[model_id] = population(group, names, rng=seed, cache=cache)
         except (InputError, ValueError, RuntimeError) as exc:
             if echo:
                 echo(f"skinfit report: no population for {model_id} on {base}: {exc}")

@@ -1,5 +1,6 @@
 """End to end on electroadhesion: recovery, reproducibility, MAP, likelihoods, results file."""
 
+import importlib
 import json
 import tomllib
 import warnings
@@ -11,6 +12,7 @@ import pytest
 from scipy import optimize, stats
 
 import skinfit
+from skinfit.errors import InputError
 from pointwise import check_pointwise_groups
 from skinfit.optimize import find_map
 from skinfit.posterior import Posterior
@@ -69,6 +71,90 @@ def test_summary_is_computed_once_per_content(ea_fit, tmp_path):
     fit.attrs["warnings"] = json.dumps(fit.warnings + [{"check": "bound", "parameter": "alpha", "status": "WARN",
                                                         "message": "made up"}])
     assert "ON A BOUND: made up" in fit.summary().loc["alpha", "note"]
+
+
+def test_saved_summary_is_read_back_with_the_same_numbers_without_computing_it(ea_fit, tmp_path, monkeypatch):
+    """A saved fit keeps its summary table: loaded, it shows the stored table, equal to the
+    one computed from the same draws to the last bit, without computing it."""
+    path = ea_fit.save(tmp_path / "fit.nc")
+    computed = skinfit.load_fit(path)._compute_summary()
+    fit_module = importlib.import_module("skinfit.fit")
+
+    def fail(self):
+        raise AssertionError("summary computed although stored")
+
+    monkeypatch.setattr(fit_module.Fit, "_compute_summary", fail)
+    back = skinfit.load_fit(path)
+    assert back.summary_stored
+    pd.testing.assert_frame_equal(back.summary(), computed, check_exact=True)
+    pd.testing.assert_frame_equal(back.summary(), ea_fit.summary(), check_exact=True)
+    assert back.summary().attrs == ea_fit.summary().attrs
+
+
+def test_a_fit_whose_summary_fails_is_saved_without_it(ea_fit, tmp_path, monkeypatch):
+    """The stored summary only saves time: when it cannot be computed the fit is saved all the
+    same (with a warning), and the summary is computed when the file is read."""
+    import xarray as xr
+
+    path = ea_fit.save(tmp_path / "fit.nc")
+    tree = xr.open_datatree(path).load()
+    del tree.attrs["summary"]
+    tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
+    fit_module = importlib.import_module("skinfit.fit")
+
+    def fail(self):
+        raise ValueError("no summary here")
+
+    with monkeypatch.context() as m:
+        m.setattr(fit_module.Fit, "_compute_summary", fail)
+        with pytest.warns(UserWarning, match="saved without its summary table .ValueError: no summary here"):
+            skinfit.load_fit(tmp_path / "bare.nc").save(tmp_path / "again.nc")
+    again = skinfit.load_fit(tmp_path / "again.nc")
+    assert "summary" not in again.attrs and not again.summary_stored
+    pd.testing.assert_frame_equal(again.summary(), ea_fit.summary(), check_exact=True)
+
+
+def test_a_stored_summary_is_never_shown_for_other_draws_or_records(ea_fit, tmp_path):
+    """A file edited after its summary was stored (draws, warnings) or whose stored table is
+    damaged shows the summary of what it now holds."""
+    path = ea_fit.save(tmp_path / "fit.nc")
+    tree = skinfit.load_fit(path).idata
+    stored = tree.attrs["summary"]
+    tree["posterior"]["alpha"].values[...] *= 2.0
+    tree.attrs["summary"] = stored  # the old table kept beside new draws
+    tree.to_netcdf(tmp_path / "edited.nc", engine="h5netcdf")
+    edited = skinfit.load_fit(tmp_path / "edited.nc")
+    assert not edited.summary_stored
+    assert edited.summary().loc["alpha", "mean"] == pytest.approx(2 * ea_fit.summary().loc["alpha", "mean"],
+                                                                  rel=1e-12)
+    warned = skinfit.load_fit(path)
+    warned.attrs["warnings"] = json.dumps(warned.warnings + [{"check": "bound", "parameter": "alpha",
+                                                              "status": "WARN", "message": "made up"}])
+    assert "ON A BOUND: made up" in warned.summary().loc["alpha", "note"]
+    for damaged in ("{not json", json.dumps({"key": json.loads(stored)["key"], "index": ["alpha"], "columns": []}),
+                    stored.replace('"values": [', '"values": [1.5, ', 1)):
+        fit = skinfit.load_fit(path)
+        fit.attrs["summary"] = damaged
+        assert not fit.summary_stored
+        pd.testing.assert_frame_equal(fit.summary(), ea_fit.summary(), check_exact=True)
+
+
+def test_a_loaded_fit_reads_its_pointwise_groups_on_first_use_from_the_same_file(ea_fit, tmp_path):
+    """load_fit gives the tree xarray reads (every group, the file's order) with the two
+    pointwise groups read only when used; a file replaced in between is an InputError, never
+    a tree of two results."""
+    import xarray as xr
+
+    path = ea_fit.save(tmp_path / "fit.nc")
+    fit = skinfit.load_fit(path)
+    assert "log_likelihood" not in fit.partial_tree.children and fit.content_hash() == ea_fit.content_hash()
+    assert fit.summary_stored and fit.group("posterior_predictive")["tangential_force"].shape[-1] == 216
+    xr.testing.assert_identical(fit.idata, xr.open_datatree(path).load())
+    assert list(fit.idata.children) == list(xr.open_datatree(path).children)
+    stale = skinfit.load_fit(path)
+    skinfit.load_fit(path).save(path)  # the file replaced (here by the same content)
+    with pytest.raises(InputError, match="changed or removed since the fit was loaded"):
+        stale.idata
 
 
 def test_result_tree_groups_and_provenance(ea_fit):

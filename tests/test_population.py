@@ -231,6 +231,59 @@ def test_warnings_for_weak_data_and_an_unconverged_hyper_posterior(thirteen):
     assert "barely move the prior" in text and "not converged" in text
 
 
+def test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs(thirteen, tmp_path, monkeypatch):
+    """population(cache=...): the same fits, settings and seed read the result sampled first
+    (every array and table equal, nothing sampled); another seed, a subject's changed draws or
+    a damaged cache file sample again (equal to an uncached run) and rewrite the file."""
+    import importlib
+
+    import pandas as pd
+    import xarray as xr
+
+    module = importlib.import_module("skinfit.population")
+    _, fits, _ = thirteen
+    small = dict(list(fits.items())[:4])
+    cache = tmp_path / "cache" / "population.npz"
+    options = {"rng": 4, "ess_target": 100, "rhat_max": 1.05}
+    first = _quiet(small, "mu", cache=cache, **options)
+    sampled, real = [], module.run_gibbs
+    monkeypatch.setattr(module, "run_gibbs", lambda *a, **k: sampled.append(1) or real(*a, **k))
+
+    def same(a, b):
+        for name in ("mu", "sd", "shrunk"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        assert a.separate.keys() == b.separate.keys()
+        for s in a.separate:
+            np.testing.assert_array_equal(a.separate[s], b.separate[s])
+        assert (a.parameters, a.families, a.subjects, a.warnings, a.contraction, a.hyperpriors) == \
+            (b.parameters, b.families, b.subjects, b.warnings, b.contraction, b.hyperpriors)
+        for table in ("summary", "subject_summary", "effects"):
+            pd.testing.assert_frame_equal(getattr(a, table)(), getattr(b, table)(), check_exact=True)
+
+    same(_quiet(small, "mu", cache=cache, **options), first)
+    assert not sampled
+    other = _quiet(small, "mu", cache=cache, **(options | {"rng": 5}))
+    assert len(sampled) == 1
+    same(other, _quiet(small, "mu", **(options | {"rng": 5})))
+    changed = dict(small)
+    label, fit = next(iter(small.items()))
+    ds = fit.group("posterior")
+    ds["mu"] = ds["mu"] * 1.01
+    tree = fit.partial_tree.copy()
+    tree["posterior"] = xr.DataTree(ds)
+    changed[label] = skinfit.Fit(tree)
+    sampled.clear()
+    moved = _quiet(changed, "mu", cache=cache, **options)
+    assert sampled and not np.array_equal(moved.separate[label], first.separate[label])
+    cache.write_bytes(cache.read_bytes()[:200])  # a partial file
+    sampled.clear()
+    same(_quiet(small, "mu", cache=cache, **options), first)
+    assert sampled
+    sampled.clear()
+    same(_quiet(small, "mu", cache=cache, **options), first)  # rewritten: read again
+    assert not sampled
+
+
 def test_correlated_population_gives_valid_correlations(thirteen):
     _, fits, _ = thirteen
     result = _quiet(dict(list(fits.items())[:6]), ["mu", "sigma"], correlated=True, rng=4, ess_target=100,

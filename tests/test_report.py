@@ -1,6 +1,7 @@
 """The static report: parses, is self-contained (no network), shows failures first, and every
 table in it holds the saved fits' numbers."""
 
+import json
 import math
 import os
 import re
@@ -128,6 +129,30 @@ def test_report_files_and_self_contained(written):
             assert link[1:] in anchors, link
 
 
+def test_a_comparison_chart_is_kept_only_while_its_table_is_unchanged(written, ea_fit, rival, tmp_path):
+    """The report written again into its folder: the comparison chart is the same file (not
+    drawn again) for the same table, and drawn again for a table with another number."""
+    import shutil
+
+    index, comparison = written
+    out = tmp_path / "again"
+    shutil.copytree(index.parent, out)
+    chart = out / "figures" / "comparison.png"
+    manifest = json.loads((out / "figures" / ".figures.json").read_text())
+    stamp = chart.stat().st_mtime_ns
+    report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=comparison)
+    assert chart.stat().st_mtime_ns == stamp
+    assert json.loads((out / "figures" / ".figures.json").read_text()) == manifest
+    changed = comparison.copy()
+    changed.loc["electroadhesion_coulomb", "log_z"] = 490.5
+    report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=changed)
+    assert chart.stat().st_mtime_ns != stamp
+    after = json.loads((out / "figures" / ".figures.json").read_text())
+    assert after["comparison.png"] != manifest["comparison.png"]
+    assert {k: v for k, v in after.items() if k != "comparison.png"} == \
+        {k: v for k, v in manifest.items() if k != "comparison.png"}
+
+
 def test_failures_are_at_the_top(written, rival):
     index, _ = written
     page = _parse(index)
@@ -214,6 +239,48 @@ def test_cli_report_from_run_directories(rival, tmp_path, capsys):
     assert any("across_electroadhesion_coulomb_mu" in link for link in page.links)
     assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep2")]) == 2
     assert "no such run directory" in capsys.readouterr().err
+
+
+_REUSED_REPORT = """
+import json, sys
+from skinfit.cli import main
+
+assert main(["report", sys.argv[1], "--out", sys.argv[2]]) == 0
+heavy = ("arviz_stats", "arviz_plots", "matplotlib", "emcee", "nlopt", "scipy.stats")
+print(json.dumps(sorted(m for m in sys.modules if m in heavy or m.split(".")[0] in heavy)))
+"""
+
+
+def test_a_report_with_nothing_to_draw_reads_the_stored_summary_and_imports_no_statistics(ea_fit, tmp_path):
+    """``skinfit report`` of a saved fit into a folder that holds its figures: the summary read
+    from the fit file and nothing drawn, so no arviz_stats, scipy.stats, matplotlib or sampler
+    is imported; every table equals the first report's, whose summary was computed (the file
+    had none stored then)."""
+    import shutil
+    import subprocess
+    import sys
+
+    import xarray as xr
+
+    run = tmp_path / "run"
+    path = ea_fit.save(run / "fit.nc")
+    tree = xr.open_datatree(path).load()
+    del tree.attrs["summary"]
+    tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
+    os.replace(tmp_path / "bare.nc", path)
+    assert not skinfit.load_fit(path).summary_stored
+    first, again = tmp_path / "first", tmp_path / "again"
+    assert main(["report", str(run), "--out", str(first)]) == 0  # the summary computed, the figures drawn
+    shutil.copytree(first, again)
+    ea_fit.save(path)
+    assert skinfit.load_fit(path).summary_stored
+    out = subprocess.run([sys.executable, "-c", _REUSED_REPORT, str(run), str(again)], capture_output=True,
+                         text=True, check=True)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+    written = sorted(p.name for p in first.iterdir() if p.is_file())
+    assert "summary.md" in written and any(n.endswith("_summary.csv") for n in written)
+    for name in written:
+        assert (again / name).read_bytes() == (first / name).read_bytes(), name
 
 
 _KILLED_REPORT = """
