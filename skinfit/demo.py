@@ -178,7 +178,7 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
                 drawing.append(pool.submit(_draw_one, path, n_of_model[p["model"]]))
         fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
                 f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
-        comparisons, populations, contrasts = _analyses(fits, plan, out, seed, echo)
+        comparisons, populations, contrasts = _analyses(fits, plan, out, report, seed, echo)
         for fut in drawing:  # a figure not drawn here (even a lost worker) is drawn by the report
             fut.exception()
     index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets",
@@ -197,9 +197,9 @@ def _draw_one(path, n_of_model):
     return store_fit_figures(path, n_of_model)
 
 
-def _analyses(fits, plan, out, seed, echo):
+def _analyses(fits, plan, out, report, seed, echo):
     """The comparison tables of each dataset's competing models, the populations and the
-    contrasts of the demo's fits."""
+    contrasts of the demo's fits (populations cached under the ``report`` folder)."""
     from .compare import compare
 
     comparisons = {}
