@@ -1,17 +1,18 @@
 """Fit time and posterior quantiles of the demo's 15 model x dataset fits, for comparing two
 versions of the sampler's start.
 
-    .venv/bin/python bench/bench_start.py --json /tmp/after.json [--label after] [--models wavy_surface ...]
-    .venv/bin/python bench/bench_start.py --compare /tmp/before.json /tmp/after.json [--md bench/results/start.md]
+    .venv/bin/python bench/bench_start.py --json /tmp/after.json [--label after] [--seeds 1 2 ...] [--models M ...]
+    .venv/bin/python bench/bench_start.py --compare BEFORE.json[,MORE.json] AFTER.json[,MORE.json] [--md bench/results/start.md]
 
-The first form runs each fit of ``skinfit demo`` (its seed, rows and split; the fits of further
-contact_area subjects left out) in this process, one after another, after an untimed warm-up
+The first form runs each fit of ``skinfit demo`` for each demo seed (its seed, rows and split;
+the fits of further contact_area subjects left out) in this process, one after another, after an untimed warm-up
 fit, and writes per fit: wall and CPU seconds of ``skinfit.fit`` (MAP to result tree, without
 the deferred pointwise groups), the fit's own timings, steps, refits, the importance start's
 rounds, and the 5/50/95% quantiles of every sampled parameter with their Monte Carlo standard
 errors (``arviz_stats.mcse(method="quantile")``, walkers as chains).  The second form writes
-the Markdown table of both runs: times side by side, and per fit the largest |z| of the quantile
-differences, z = (after - before) / sqrt(mcse_before^2 + mcse_after^2).
+the Markdown tables of both: times side by side (demo seed 1; then per pair over further seeds), and
+per fit the largest |z| of the quantile differences, z = (after - before) / sqrt(mcse_before^2 +
+mcse_after^2).
 """
 
 import argparse
@@ -90,46 +91,77 @@ def _uptime():
     return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
 
 
+def _load(paths):
+    """Runs from comma-separated JSON files, merged: (first run's header, {(model, dataset, demo seed): fit})."""
+    runs = [json.loads(Path(p).read_text()) for p in paths.split(",")]
+    return runs, {(f["model"], f["dataset"], f.get("demo_seed", 1)): f for r in runs for f in r["fits"]}
+
+
+def _z(f, g):
+    """Quantile differences of two fits in Monte Carlo standard errors (0 where bit-identical)."""
+    z = []
+    for name, qs in f["quantiles"].items():
+        for (q1, s1), (q0, s0) in zip(qs, g["quantiles"][name]):
+            z.append(0.0 if q1 == q0 else (q1 - q0) / np.hypot(s0, s1))
+    return np.array(z)
+
+
 def compare(args):
-    a, b = (json.loads(Path(p).read_text()) for p in args.compare)
-    before = {(f["model"], f["dataset"]): f for f in a["fits"]}
-    lines = [f"# The sampler's start: demo fit times and posterior quantiles, {a['label']} vs {b['label']}", "",
-             f"Commands: `{a['command']}` ({a['label']}, commit {a['commit']}, {a['date']}) and "
-             f"`{b['command']}` ({b['label']}, commit {b['commit']}, {b['date']}); compared with "
-             f"`.venv/bin/python bench/bench_start.py --compare {' '.join(args.compare)}`.", "",
-             f"Machine: {b['machine']['nproc']} CPUs ({b['machine']['cpu']}), shared with other jobs; Python "
-             f"{b['machine']['python']}. Load: {a['label']} `{a['uptime_start']}` -> `{a['machine']['uptime']}`; "
-             f"{b['label']} `{b['uptime_start']}` -> `{b['machine']['uptime']}`.", "",
-             "Each fit: the demo's seed (demo seed 1), rows and split; wall and CPU seconds of `skinfit.fit` "
-             "(MAP, start, sampling, result tree; not the deferred pointwise groups), one run each in one process. "
-             "Importance ESS: effective sample size of each importance round (2000 draws a round). Quantile "
-             "agreement: the largest |z| over the 5/50/95% quantiles of every sampled parameter, "
-             "z = difference / sqrt(mcse_1^2 + mcse_2^2) (ArviZ quantile MCSE, walkers as chains); "
-             "n params x 3 quantiles z-scores per fit.", "",
-             f"| model | dataset | wall s {a['label']} | wall s {b['label']} | CPU s {a['label']} | CPU s {b['label']} "
-             f"| steps | refits | importance ESS {a['label']} | importance ESS {b['label']} | max abs z (n) |",
+    (ra, a), (rb, b) = (_load(p) for p in args.compare)
+    la, lb = ra[0]["label"], rb[0]["label"]
+    runs = "; ".join(f"`{r['command']}` ({r['label']}, commit {r['commit'] or '?'}, {r['date']}, load "
+                     f"`{r['uptime_start'].split('load average:')[-1].strip()}` -> "
+                     f"`{r.get('machine', {}).get('uptime', '?').split('load average:')[-1].strip()}`)"
+                     for r in ra + rb)
+    m = rb[0]["machine"]
+    lines = [f"# The sampler's start: demo fit times and posterior quantiles, {la} vs {lb}", "",
+             f"Runs: {runs}. Table: `.venv/bin/python bench/bench_start.py --compare {' '.join(args.compare)}"
+             + (f" --md {args.md}" if args.md else "") + "`.", "",
+             f"Machine: {m['nproc']} CPUs ({m['cpu']}), shared with other jobs (wall times inflated by the load "
+             f"shown; compare CPU); Python {m['python']}.", "",
+             "Each fit: the demo's seed, rows and split; wall and CPU seconds of `skinfit.fit` (MAP, start, "
+             "sampling, result tree; not the deferred pointwise groups), one run each, in one process after a "
+             "warm-up fit. Importance ESS: effective sample size of each importance round (2000 draws a round). "
+             "Quantiles: 5/50/95% of every sampled parameter; z = difference / sqrt(mcse_1^2 + mcse_2^2) (ArviZ "
+             "quantile MCSE, walkers as chains); `identical` where every quantile is bit-identical.", "",
+             "## Demo seed 1, every model x dataset pair of the demo", "",
+             f"| model | dataset | wall s {la} | wall s {lb} | CPU s {la} | CPU s {lb} | steps | refits at "
+             f"| importance ESS {la} | importance ESS {lb} | max abs z (n) |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
-    all_z = []
-    for f in b["fits"]:
-        g = before.get((f["model"], f["dataset"]))
-        if g is None:
-            continue
-        z = []
-        for name, qs in f["quantiles"].items():
-            for (q1, s1), (q0, s0) in zip(qs, g["quantiles"][name]):
-                z.append((q1 - q0) / np.hypot(s0, s1) if np.hypot(s0, s1) > 0 else (0.0 if q1 == q0 else np.inf))
-        all_z += z
-        same = all(f["quantiles"][n] == g["quantiles"][n] for n in f["quantiles"])
+    keys = [k for k in b if k in a]
+    for key in (k for k in keys if k[2] == 1):
+        f, g = b[key], a[key]
+        z = _z(f, g)
         ess = [", ".join(f"{x['ess']:.0f}" for x in r["importance"]) for r in (g, f)]
-        lines.append(f"| {f['model']} | {f['dataset']} | {g['wall_s']:.2f} | {f['wall_s']:.2f} | {g['cpu_s']:.2f} "
-                     f"| {f['cpu_s']:.2f} | {g['n_steps']} -> {f['n_steps']} | {len(g['refits'])} -> "
-                     f"{len(f['refits'])} | {ess[0]} | {ess[1]} | "
-                     + ("identical" if same else f"{np.max(np.abs(z)):.2f} ({len(z)})") + " |")
-    tot = [sum(r[k] for r in x["fits"]) for x in (a, b) for k in ("wall_s", "cpu_s")]
+        lines.append(f"| {key[0]} | {key[1]} | {g['wall_s']:.2f} | {f['wall_s']:.2f} | {g['cpu_s']:.2f} "
+                     f"| {f['cpu_s']:.2f} | {g['n_steps']} -> {f['n_steps']} | {g['refits']} -> {f['refits']} "
+                     f"| {ess[0]} | {ess[1]} | "
+                     + ("identical" if not z.any() else f"{np.max(np.abs(z)):.2f} ({len(z)})") + " |")
+    one = [k for k in keys if k[2] == 1]
+    tot = [sum(x[k][c] for k in one) for x in (a, b) for c in ("wall_s", "cpu_s")]
     lines += [f"| total | | {tot[0]:.1f} | {tot[2]:.1f} | {tot[1]:.1f} | {tot[3]:.1f} | | | | | |", ""]
-    all_z = np.abs(np.array(all_z))
-    lines.append(f"All quantile z-scores: {len(all_z)}, |z| > 2: {int(np.sum(all_z > 2))}, |z| > 3: "
-                 f"{int(np.sum(all_z > 3))}, largest {all_z.max():.2f} (identical fits count z = 0).")
+    pairs = sorted({k[:2] for k in keys if k[2] != 1})
+    if pairs:
+        lines += ["## Further demo seeds, the pairs whose start changes", "",
+                  f"| model | dataset | demo seeds | CPU s {la} | CPU s {lb} | median CPU s {la} -> {lb} | steps {la} "
+                  f"| steps {lb} | max abs z (n) |", "|---|---|---|---|---|---|---|---|---|"]
+        for pair in pairs:
+            ks = sorted(k for k in keys if k[:2] == pair)
+            z = np.concatenate([_z(b[k], a[k]) for k in ks])
+            cpu = [[x[k]["cpu_s"] for k in ks] for x in (a, b)]
+            lines.append(f"| {pair[0]} | {pair[1]} | {', '.join(str(k[2]) for k in ks)} "
+                         f"| {', '.join(f'{c:.2f}' for c in cpu[0])} | {', '.join(f'{c:.2f}' for c in cpu[1])} "
+                         f"| {np.median(cpu[0]):.2f} -> {np.median(cpu[1]):.2f} "
+                         f"| {', '.join(str(a[k]['n_steps']) for k in ks)} | {', '.join(str(b[k]['n_steps']) for k in ks)} "
+                         f"| {np.max(np.abs(z)):.2f} ({len(z)}) |")
+        lines.append("")
+    z = np.abs(np.concatenate([_z(b[k], a[k]) for k in keys]))
+    changed = [k for k in keys if _z(b[k], a[k]).any()]
+    zc = np.abs(np.concatenate([_z(b[k], a[k]) for k in changed])) if changed else np.zeros(0)
+    lines.append(f"Quantile z-scores: {len(z)} over {len(keys)} fits; {len(keys) - len(changed)} fits bit-identical. "
+                 f"Of the {len(zc)} of the {len(changed)} fits that differ: |z| > 2: {int(np.sum(zc > 2))} "
+                 f"(normal: {0.0455 * len(zc):.1f}), |z| > 3: {int(np.sum(zc > 3))} (normal: {0.0027 * len(zc):.1f}), "
+                 f"largest {zc.max() if len(zc) else 0:.2f}.")
     text = "\n".join(lines) + "\n"
     if args.md:
         Path(args.md).write_text(text)
