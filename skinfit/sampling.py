@@ -5,8 +5,10 @@ How a fit samples (:func:`skinfit.fit.start`, :func:`importance_start`, :func:`r
 1. The Laplace approximation at the MAP, in sampling coordinates, as a Student-t (with a
    twice-as-wide component), is improved by population Monte Carlo: 2000 draws in one
    vectorised call, importance weights, a mixture refitted to the weighted draws, up to
-   three rounds.  The walkers are drawn from the weighted draws, so they start in the
-   typical set.
+   three rounds.  Where the weights are degenerate at first (a Hessian at a cusp of the log
+   density gives a proposal far too narrow), the proposal is first refitted to tempered
+   weights, widening it round by round until they are not.  The walkers are drawn from the
+   weighted draws, so they start in the typical set.
 2. emcee runs with :class:`~skinfit.moves.IndependenceMove` (80% of steps: every walker
    makes three independence updates in a row from fresh draws of the mixture, all drawn and
    evaluated in one call for the whole ensemble) and :class:`~skinfit.moves.DEMove` (20%:
@@ -36,7 +38,7 @@ import emcee
 import numpy as np
 
 from .moves import DEMove, IndependenceMove, default_moves
-from .proposal import fit_mixture, select_mixture
+from .proposal import MixtureT, fit_mixture, select_mixture
 
 __all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "independence_move", "adaptive_moves",
            "describe_moves", "importance_start", "sampler_settings"]
@@ -54,6 +56,11 @@ IMPORTANCE_SIZE = 2000
 IMPORTANCE_ROUNDS = 3
 IMPORTANCE_MIN_ESS = 50
 IMPORTANCE_GOOD = 0.5
+#: Rounds at most, before the first with :data:`IMPORTANCE_MIN_ESS`, whose proposal is refitted
+#: to tempered weights (:func:`importance_start`): each about doubles a too-narrow proposal's
+#: width; a Laplace approximation at a cusp of the log density (wavy_surface: widths 20-100x too
+#: small) took 5-9 (docs/design/sampling.md).
+IMPORTANCE_TEMPERED = 12
 #: Mixture sizes a refit chooses among (by held-out likelihood).
 COMPONENT_CHOICES = (1, 3, 6)
 #: Share of steps that are independence moves (the rest: differential evolution).
@@ -256,7 +263,8 @@ def sampler_settings():
     skinfit whose sampler differs (it would not give the same samples for the same seed)."""
     return {"moves": describe_moves(), "check_every": CHECK_EVERY, "adapt_first": ADAPT_FIRST, "tau_keep": TAU_KEEP,
             "components": list(COMPONENT_CHOICES), "importance": [IMPORTANCE_SIZE, IMPORTANCE_ROUNDS,
-                                                                   IMPORTANCE_MIN_ESS, IMPORTANCE_GOOD]}
+                                                                   IMPORTANCE_MIN_ESS, IMPORTANCE_GOOD,
+                                                                   IMPORTANCE_TEMPERED]}
 
 
 def describe_moves():
@@ -310,7 +318,8 @@ def _adapt(chain, seed, nu, max_samples=2000):
     return fit_mixture(_subsample(window.reshape(-1, d), max_samples, rng), best, rng, nu=nu)
 
 
-def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rounds=IMPORTANCE_ROUNDS):
+def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rounds=IMPORTANCE_ROUNDS,
+                     tempered=IMPORTANCE_TEMPERED):
     """Adapt the proposal by importance sampling before any MCMC step, and start the walkers
     from the weighted draws: population Monte Carlo (Cappe et al. 2004).
 
@@ -319,14 +328,20 @@ def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rou
     measures how well that proposal matches the posterior.  While it is at least
     :data:`IMPORTANCE_MIN_ESS` and below :data:`IMPORTANCE_GOOD` of the draws, the proposal is
     refitted to the weighted draws (number of components chosen on held-out draws) for the
-    next round.  The result is the best proposal measured, and ``nwalkers`` distinct draws of
-    its round picked with probability proportional to their weights (in the typical set:
-    little burn-in).  Returns (proposal, walkers or None when every round's weights were
-    degenerate, list of rounds: draws, effective sample size, points inside the support,
-    whether a refit followed).
+    next round, ``rounds`` such rounds at most.  Before the first round that reaches
+    :data:`IMPORTANCE_MIN_ESS` (a Laplace approximation from a Hessian at a cusp, too narrow
+    along some axes), up to ``tempered`` rounds refit the proposal's form (a Student-t and one
+    twice as wide, as :func:`skinfit.fit.start` builds it) to the draws weighted by ``w**beta``,
+    ``beta`` in [0, 1] the largest whose weights keep that effective sample size: the draws then
+    represent ``post**beta * proposal**(1 - beta)``, between the two, wider than a too-narrow
+    proposal where the posterior is.  The result is the best proposal measured, and ``nwalkers``
+    distinct draws of its round picked with probability proportional to their weights (in the
+    typical set: little burn-in).  Returns (proposal, walkers or None when every round's weights
+    were degenerate, list of rounds: draws, effective sample size, points inside the support,
+    whether a refit followed, and ``beta`` for a tempered refit).
     """
-    record, best = [], None  # best: (ess, proposal, walkers)
-    for _ in range(rounds):
+    record, best, informative = [], None, 0  # best: (ess, proposal, walkers)
+    while True:
         x = proposal.draw(rng, size)
         log_w = post(x) - proposal.logpdf(x)
         finite = np.isfinite(log_w)
@@ -338,17 +353,42 @@ def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rou
         ess = float(1.0 / np.sum(w * w))
         if best is None or ess > best[0]:
             best = (ess, proposal, x[rng.choice(size, nwalkers, replace=False, p=_floor(w, finite))])
-        refit = IMPORTANCE_MIN_ESS <= ess < IMPORTANCE_GOOD * size and len(record) + 1 < rounds
-        record.append({"draws": size, "ess": ess, "inside_support": int(finite.sum()), "refit": refit})
+        informative += ess >= IMPORTANCE_MIN_ESS
+        if informative:  # the weights say where the posterior is: population Monte Carlo
+            refit = ess < IMPORTANCE_GOOD * size and IMPORTANCE_MIN_ESS <= ess and informative < rounds
+            record.append({"draws": size, "ess": ess, "inside_support": int(finite.sum()), "refit": refit})
+            if not refit:
+                break
+            half = size // 2
+            k = select_mixture(x[:half], x[half:], COMPONENT_CHOICES, rng, train_weights=w[:half] + 1e-300,
+                               test_weights=w[half:] + 1e-300, nu=proposal.nu)
+            proposal = fit_mixture(x, k, rng, weights=w, nu=proposal.nu)
+            continue
+        refit = len(record) < tempered
+        beta = _temper(log_w, finite, IMPORTANCE_MIN_ESS) if refit else None
+        record.append({"draws": size, "ess": ess, "inside_support": int(finite.sum()), "refit": refit,
+                       "beta": beta})
         if not refit:
             break
-        half = size // 2
-        k = select_mixture(x[:half], x[half:], COMPONENT_CHOICES, rng, train_weights=w[:half] + 1e-300,
-                           test_weights=w[half:] + 1e-300, nu=proposal.nu)
-        proposal = fit_mixture(x, k, rng, weights=w, nu=proposal.nu)
+        one = fit_mixture(x, 1, rng, weights=np.where(finite, np.exp(beta * (log_w - log_w[finite].max())), 0.0),
+                          nu=proposal.nu)
+        proposal = MixtureT([0.5, 0.5], np.repeat(one.means, 2, axis=0), [one.covs[0], 4 * one.covs[0]], proposal.nu)
     if best is None or best[0] < IMPORTANCE_MIN_ESS:
         return proposal if best is None else best[1], None, record
     return best[1], best[2], record
+
+
+def _temper(log_w, finite, target):
+    """The largest ``beta`` in [0, 1] (to 1e-3) at which the weights ``exp(beta * log_w)`` of the
+    ``finite`` draws have an effective sample size of at least ``target`` (bisection: the size
+    falls as ``beta`` grows, from the number of finite draws at 0)."""
+    centred = log_w[finite] - log_w[finite].max()
+    lo, hi = 0.0, 1.0
+    while hi - lo > 1e-3:
+        mid = 0.5 * (lo + hi)
+        w = np.exp(mid * centred)
+        lo, hi = (mid, hi) if w.sum() ** 2 / (w @ w) >= target else (lo, mid)
+    return lo
 
 
 def _floor(w, finite):

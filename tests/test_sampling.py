@@ -124,8 +124,62 @@ def test_importance_start_improves_a_poor_proposal_and_places_walkers(rng):
     # the returned proposal is the one that scored best, and it resembles the target
     np.testing.assert_allclose(proposal.weights @ proposal.means, target.mean, atol=0.2 * sd.max())
     far = MixtureT([1.0], (target.mean + 50 * sd)[None], np.diag(sd**2)[None])
-    _, none, record = importance_start(target, far, 32, rng)
-    assert none is None and record[0]["ess"] < 50
+    _, none, record = importance_start(target, far, 32, rng, tempered=0)
+    assert none is None and len(record) == 1 and record[0]["ess"] < 50
+
+
+def test_tempered_rounds_find_a_posterior_far_from_the_proposal(rng):
+    """A proposal 50 sd off the target, whose weights are degenerate: tempered refits walk it to
+    the target, and the walkers start in its typical set (their mean within 0.5 sd of the target's)."""
+    from skinfit.sampling import IMPORTANCE_MIN_ESS, importance_start
+
+    target = _Gaussian()
+    sd = np.sqrt(np.diag(target.cov))
+    far = MixtureT([1.0], (target.mean + 50 * sd)[None], np.diag(sd**2)[None])
+    _, walkers, record = importance_start(target, far, 32, rng)
+    assert record[0]["ess"] < IMPORTANCE_MIN_ESS <= max(r["ess"] for r in record)
+    assert walkers is not None and np.all(np.abs(walkers.mean(axis=0) - target.mean) < 0.5 * sd)
+
+
+class _Cusp:
+    """log density -sum_i |u_i . (z - m)| / b_i: independent Laplace densities along the rows
+    u_i of a rotation, a cusp at the mode m; along u_i the standard deviation is sqrt(2) b_i."""
+
+    def __init__(self, d=4, seed=0):
+        r = np.random.default_rng(seed)
+        self.u = np.linalg.qr(r.normal(size=(d, d)))[0].T
+        self.b = np.geomspace(0.5, 4.0, d)
+        self.m = r.normal(size=d)
+
+    def __call__(self, z):
+        return -np.sum(np.abs((z - self.m) @ self.u.T) / self.b, axis=1)
+
+
+def test_importance_start_widens_a_laplace_proposal_at_a_cusp(rng):
+    """The start fit.start makes, on a density whose mode is a cusp: the finite-difference
+    Hessian there (step 1e-3) makes the Laplace proposal ~40-120x too narrow, and its importance
+    weights are degenerate.  The start must still reach an effective sample size of
+    IMPORTANCE_MIN_ESS, place walkers, and return a proposal whose importance-weighted draws
+    have the closed-form standard deviation sqrt(2) b_i along each axis u_i (the walkers, from
+    the Laplace ball, had 1/40 of it)."""
+    from skinfit.optimize import laplace_covariance
+    from skinfit.sampling import IMPORTANCE_MIN_ESS, importance_start
+
+    target = _Cusp()
+    cov = laplace_covariance(target, target.m)
+    laplace = MixtureT([0.5, 0.5], [target.m, target.m], [cov, 4 * cov])  # as fit.start builds it
+    exact = np.sqrt(2.0) * target.b
+    assert np.all(np.sqrt(np.diag(target.u @ cov @ target.u.T)) < exact / 20)  # the failure this guards
+    proposal, walkers, record = importance_start(target, laplace, 64, rng)
+    assert record[0]["ess"] < IMPORTANCE_MIN_ESS <= max(r["ess"] for r in record) and walkers is not None
+    x = proposal.draw(rng, 40000)
+    w = np.exp(target(x) - proposal.logpdf(x))
+    w /= w.sum()
+    along = (x - target.m) @ target.u.T
+    sd = np.sqrt(w @ (along - w @ along) ** 2)
+    assert 1 / np.sum(w**2) > 1000
+    np.testing.assert_allclose(sd, exact, rtol=0.1)
+    np.testing.assert_allclose(w @ along, 0.0, atol=0.1 * exact.min())
 
 
 def test_a_chain_converged_at_a_refit_step_is_kept_not_refitted(rng, monkeypatch):
