@@ -3,11 +3,14 @@
     .venv/bin/python bench/bench_report.py [--work /tmp/skinfit-bench-report] [--skip-fresh]
     .venv/bin/python bench/bench_report.py --report-only [--work DIR] [--profile FILE]
 
-Rows: the whole ``skinfit demo`` from nothing (28 fits: 15 compared + 12 more contact_area
-subjects, the 13-subject population, contrasts, report); the demo again with every fit reused
-and the report's figure cache emptied (every figure drawn, in parallel processes); the demo
-again with fits and figures reused; ``skinfit report`` of one fit (its figures new). Written
-to bench/results/report.md with the machine and its load.
+Rows (whole processes, the figure store in ``WORK/store``): the whole ``skinfit demo`` from
+nothing (27 fits: 15 compared + 12 more contact_area subjects, the 13-subject population,
+contrasts, report; the figure store empty); the demo again with every fit reused and both the
+report's figures and the store emptied (every figure drawn); into a new report folder with the
+store kept (figures copied from it); again into the same folder (everything reused);
+``skinfit report`` of one fit with its figures new (store emptied), then reused. Written to
+bench/results/report_commands.md with the machine and its load: wall, and user + sys CPU of
+the process and its children.
 
 ``--report-only`` times :func:`skinfit.report.write_report` alone, in this process, on the
 demo's saved fits (made once under ``--work`` when absent, not timed): the demo is run with
@@ -32,20 +35,32 @@ from common import machine_info, machine_text  # noqa: E402
 SKINFIT = [sys.executable, "-m", "skinfit"]
 
 
-def timed(args, log):
+def timed(args, log, env=None):
+    """(wall s, load average after) of ``skinfit ARGS``; with ``env``, also its CPU s (with
+    children) as a third value."""
+    import os
+    import resource
+
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    out = subprocess.run(SKINFIT + args, capture_output=True, text=True)
+    out = subprocess.run(SKINFIT + args, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     log.write_text(out.stdout + out.stderr)
     if out.returncode:
         raise SystemExit(f"{' '.join(args)} failed ({out.returncode}); see {log}")
-    return wall, subprocess.run(["uptime"], capture_output=True, text=True).stdout.split("load average:")[-1].strip()
+    load = " ".join(f"{v:.1f}" for v in os.getloadavg())
+    if env is None:
+        return wall, load
+    return wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, load
 
 
 def _report_only(work, profile):
     """Rows (what, target, wall s, CPU text, load) of write_report on the demo's fits."""
+    import os
     import resource
 
+    os.environ["SKINFIT_FIGURE_STORE"] = "off"  # this mode measures drawing: no figure copied from the store
     import skinfit.report as report
     from skinfit.demo import run_demo
 
@@ -104,9 +119,12 @@ def main():
     ap.add_argument("--profile", help="with --report-only: cProfile of the first write_report, one worker")
     ap.add_argument("--work", default="/tmp/skinfit-bench-report")
     ap.add_argument("--skip-fresh", action="store_true", help="reuse the fits already under --work")
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "report.md"))
+    ap.add_argument("--out", default=None, help="default: bench/results/report.md with --report-only, "
+                                                "else bench/results/report_commands.md")
     args = ap.parse_args()
     work = Path(args.work)
+    args.out = args.out or str(Path(__file__).parent / "results" / ("report.md" if args.report_only
+                                                                     else "report_commands.md"))
     if args.report_only:
         work.mkdir(parents=True, exist_ok=True)
         rows = _report_only(work, args.profile)
@@ -122,27 +140,41 @@ def main():
         return
     if not args.skip_fresh:
         shutil.rmtree(work, ignore_errors=True)
-    runs, rep = work / "runs", work / "report"
+    work.mkdir(parents=True, exist_ok=True)
+    import os
+
+    runs, rep, store = work / "runs", work / "report", work / "store"
+    env = {**os.environ, "SKINFIT_FIGURE_STORE": str(store), "MPLBACKEND": "Agg"}
+    demo = ["demo", "--out", str(runs), "--report"]
     rows = []
     if not args.skip_fresh:
-        rows.append(("whole `skinfit demo` from nothing (28 fits, population, contrasts, report)", "< 60 s",
-                     *timed(["demo", "--out", str(runs), "--report", str(rep)], work / "fresh.log")))
+        rows.append(("whole `skinfit demo` from nothing (27 fits, population, contrasts, report; empty figure store)",
+                     "< 60 s", *timed(demo + [str(rep)], work / "fresh.log", env)))
     else:
-        timed(["demo", "--out", str(runs), "--report", str(rep)], work / "warmup.log")
+        timed(demo + [str(rep)], work / "warmup.log", env)
     shutil.rmtree(rep / "figures", ignore_errors=True)
-    rows.append(("`skinfit demo` with every fit reused, every figure drawn (empty figure cache)", "< 20 s",
-                 *timed(["demo", "--out", str(runs), "--report", str(rep)], work / "reused.log")))
-    rows.append(("`skinfit demo` with fits and figures reused", "", *timed(["demo", "--out", str(runs), "--report",
-                                                                        str(rep)], work / "cached.log")))
+    shutil.rmtree(store, ignore_errors=True)
+    rows.append(("`skinfit demo`, every fit reused, every figure drawn (report figures and store emptied)", "< 20 s",
+                 *timed(demo + [str(rep)], work / "reused.log", env)))
+    shutil.rmtree(work / "report2", ignore_errors=True)
+    rows.append(("`skinfit demo`, every fit reused, into a new report folder (figures copied from the store)",
+                 "< 20 s", *timed(demo + [str(work / "report2")], work / "report2.log", env)))
+    rows.append(("`skinfit demo`, fits and figures reused (same report folder)", "",
+                 *timed(demo + [str(rep)], work / "cached.log", env)))
     one = runs / "electroadhesion_synthetic" / "electroadhesion"
-    rows.append(("`skinfit report` of one fit (electroadhesion), figures new", "< 3 s",
-                 *timed(["report", str(one), "--out", str(work / "one")], work / "one.log")))
+    shutil.rmtree(work / "one", ignore_errors=True)
+    shutil.rmtree(store, ignore_errors=True)
+    rows.append(("`skinfit report` of one fit (electroadhesion), figures drawn (store emptied)", "< 3 s",
+                 *timed(["report", str(one), "--out", str(work / "one")], work / "one.log", env)))
+    rows.append(("the same again, figures reused", "< 3 s",
+                 *timed(["report", str(one), "--out", str(work / "one")], work / "one2.log", env)))
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = ["# Reports and the demo: whole-process wall times", "",
+    lines = ["# Reports and the demo: whole-process times", "",
              f"`.venv/bin/python bench/bench_report.py{' --skip-fresh' if args.skip_fresh else ''}` - {stamp}", "",
              machine_text(machine_info()), "",
-             "| command | target | wall s | load average after (1, 5, 15 min) |", "|---|---|---|---|"]
-    lines += [f"| {name} | {target} | {wall:.1f} | {load} |" for name, target, wall, load in rows]
+             "| command | target | wall s | CPU s (with children) | load average after (1, 5, 15 min) |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {name} | {target} | {wall:.1f} | {cpu:.1f} | {load} |" for name, target, wall, cpu, load in rows]
     Path(args.out).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

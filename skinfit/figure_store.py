@@ -58,20 +58,18 @@ def _version(pkg):
 
 @lru_cache(maxsize=1)
 def code_hash():
-    """sha256 of the skinfit package's source (its .py files, templates and shipped cards) and
-    of the plotting libraries' versions: a figure drawn by other code is not reused."""
-    h = hashlib.sha256()
-    root = Path(__file__).parent
-    for path in sorted(root.rglob("*")):
-        if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts:
-            h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
-    h.update(json.dumps({pkg: _version(pkg) for pkg in _LIBRARIES}, sort_keys=True).encode())
-    return h.hexdigest()
+    """sha256 of the skinfit package's source (:func:`skinfit.paths.source_hash`) and of the
+    plotting libraries' versions: a figure drawn by other code is not reused."""
+    from .paths import source_hash
+
+    doc = {"source": source_hash(), "versions": {pkg: _version(pkg) for pkg in _LIBRARIES}}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
 
 
 def storable(fit):
     """True when ``fit`` is of a shipped model card, unchanged since the fit, whose functions are
-    all skinfit's own: then its figures follow from its content and :func:`code_hash`."""
+    all skinfit's own: then what is computed from it (its figures, a population) follows from
+    its content and skinfit's source (:func:`skinfit.paths.source_hash`)."""
     from .models import load_model
     from .paths import locate, shipped_root
     from .registry import resolve

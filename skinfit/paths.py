@@ -137,3 +137,24 @@ def display(path: Path) -> str:
         except ValueError:
             pass
     return str(path)
+
+
+def source_hash() -> str:
+    """sha256 of skinfit's own source: every .py, template and card file of the package (the
+    physics, the sampler, the plots). Keys results kept by content (the figure store, the
+    population cache), so that another skinfit never reuses them. Computed once a process."""
+    global _SOURCE_HASH
+    if _SOURCE_HASH is None:
+        import hashlib
+
+        h = hashlib.sha256()
+        root = Path(__file__).parent
+        for path in sorted(root.rglob("*")):
+            if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts:
+                h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        _SOURCE_HASH = h.hexdigest()
+    return _SOURCE_HASH
+
+
+_SOURCE_HASH = None
+

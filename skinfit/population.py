@@ -51,6 +51,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import InputError
+from .figure_store import storable
 from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator
 from .hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 
@@ -533,7 +534,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         A file that keeps the result (NumPy ``.npz``, written atomically) with the sha256 of
         its inputs: every subject's label and fit content (:meth:`~skinfit.fit.Fit.content_hash`),
         the arguments above, the seed (an int ``rng`` only) and the code of skinfit and the
-        versions of numpy and scipy.  A call with the same inputs reads the same result from
+        versions of numpy and scipy; used only for fits of shipped, unchanged model cards (a
+        user's own forward function may change without the fits changing).  A call with the same inputs reads the same result from
         it instead of sampling (its warnings are warned again); other inputs, or an unreadable
         file, sample and rewrite it.
 
@@ -544,7 +546,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     seed, rng = rng, as_generator(rng)
     fits = _as_fits(fits, model)
     key = None
-    if cache is not None and isinstance(seed, (int, np.integer)) and all(isinstance(f, Fit) for f in fits.values()):
+    if (cache is not None and isinstance(seed, (int, np.integer)) and all(isinstance(f, Fit) for f in fits.values())
+            and all(storable(f) for f in fits.values())):  # a user's model code is not in the key: not kept
         key = _cache_key(fits, {"parameters": parameters, "family": family, "correlated": correlated,
                                 "method": method, "seed": int(seed), "chains": chains, "ess_target": ess_target,
                                 "rhat_max": rhat_max, "max_sweeps": max_sweeps, "burn": burn,
@@ -653,9 +656,9 @@ def _cache_key(fits, settings):
     import hashlib
     from importlib import metadata
 
-    h = hashlib.sha256()
-    for path in sorted(Path(__file__).parent.rglob("*.py")):
-        h.update(path.read_bytes())
+    from .paths import source_hash
+
+    h = hashlib.sha256(source_hash().encode())
     doc = {"format": 1, "subjects": [[label, f.content_hash()] for label, f in fits.items()],
            "settings": settings, "versions": [metadata.version("numpy"), metadata.version("scipy")]}
     h.update(json.dumps(doc, sort_keys=True, default=str).encode())

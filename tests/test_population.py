@@ -282,6 +282,12 @@ def test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs(thi
     sampled.clear()
     same(_quiet(small, "mu", cache=cache, **options), first)  # rewritten: read again
     assert not sampled
+    # fits of a card other than the shipped one (a user's model, whose code the key does not hold)
+    tree = fit.partial_tree.copy()
+    tree.attrs["model_sha256"] = "0" * 64
+    foreign, kept = {**small, label: skinfit.Fit(tree)}, tmp_path / "foreign.npz"
+    _quiet(foreign, "mu", cache=kept, **options)
+    assert not kept.exists()
 
 
 def test_correlated_population_gives_valid_correlations(thirteen):
