@@ -178,7 +178,7 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
                 drawing.append(pool.submit(_draw_one, path, n_of_model[p["model"]]))
         fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
                 f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
-        comparisons, populations, contrasts = _analyses(fits, plan, out, report, seed, echo)
+        comparisons, populations, contrasts = _analyses(fits, plan, out, seed, echo)
         for fut in drawing:  # a figure not drawn here (even a lost worker) is drawn by the report
             fut.exception()
     index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets",
@@ -197,9 +197,10 @@ def _draw_one(path, n_of_model):
     return store_fit_figures(path, n_of_model)
 
 
-def _analyses(fits, plan, out, report, seed, echo):
+def _analyses(fits, plan, out, seed, echo):
     """The comparison tables of each dataset's competing models, the populations and the
-    contrasts of the demo's fits (populations cached under the ``report`` folder)."""
+    contrasts of the demo's fits (each population kept under ``out``, with the fits it is
+    drawn from, whichever report folder shows it)."""
     from .compare import compare
 
     comparisons = {}
@@ -220,7 +221,7 @@ def _analyses(fits, plan, out, report, seed, echo):
     from .report_groups import group_analyses
 
     t0 = time.perf_counter()
-    populations, contrasts = group_analyses(fits, seed=seed, echo=echo, cache_dir=Path(report) / ".cache")
+    populations, contrasts = group_analyses(fits, seed=seed, echo=echo, cache_dir=Path(out) / ".cache")
     if populations or contrasts:
         echo(f"\npopulation of {', '.join(populations) or 'none'} and {len(contrasts)} contrast table(s): "
              f"{time.perf_counter() - t0:.1f} s")

@@ -588,6 +588,8 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         shown.to_csv(out / f"{stem}.csv", index=False)
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
                                 "table": _table(shown.head(20).set_index("A"), "A")})
+    from . import figure_store
+
     comparisons, manifest = [], _manifest(figdir)  # a comparison chart is kept while its table is the same
     tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
     for name, table in tables.items():
@@ -598,10 +600,15 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         path = figdir / f"{stem}.png"
         key = f"plot_comparison:{hashlib.sha256(table.to_csv().encode()).hexdigest()}:{_code_key('plot_comparison')}"
         drawn = manifest.get(path.name) == key and path.exists() and path.with_suffix(".pdf").exists()
+        digest = hashlib.sha256(key.encode()).hexdigest()  # a table's chart is storable: nothing but the table
+        drawn = drawn or figure_store.fetch(digest, path)  # and skinfit's code draws it
         error = None if drawn else _figure(lambda table=table: plots.plot_comparison(table), path)
         if error:
             manifest.pop(path.name, None)
         elif not drawn:
+            manifest[path.name] = key
+            figure_store.put(digest, path)
+        else:
             manifest[path.name] = key
         if error:
             issues_all.append({"status": "WARN", "fit": "", "where": "model comparison", "text": error})
