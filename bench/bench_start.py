@@ -37,14 +37,11 @@ PROBS = (0.05, 0.5, 0.95)
 
 def _slot_draws(fit):
     """(name, (walkers, draws) array) of every sampled scalar, in slot order."""
-    tree = fit.group("posterior")
-    out = []
-    for s in fit.posterior.slots:
-        v = tree[s.base]
-        if s.level is not None:
-            v = v.sel({next(d for d in v.dims if d not in ("chain", "draw")): s.level})
-        out.append((s.name, np.asarray(v, dtype=float)))
-    return out
+    from skinfit.fit import _slot_values
+
+    ds = fit.group("posterior")
+    shape = (ds.sizes["chain"], ds.sizes["draw"])
+    return [(s["name"], _slot_values(ds, s).astype(float).reshape(shape)) for s in fit.attr("slots")]
 
 
 def run_one(item):
