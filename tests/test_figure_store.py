@@ -113,3 +113,22 @@ def test_storable_wherever_the_process_runs(ea_fit, tmp_path, monkeypatch):
     working folder (a report run from any folder)."""
     monkeypatch.chdir(tmp_path)
     assert figure_store.storable(ea_fit)
+
+
+def test_a_comparison_chart_is_copied_into_a_new_report_folder(ea_fit, store, tmp_path, monkeypatch):
+    """A model-comparison chart depends on its table alone: drawn once, then copied from the
+    store into another report's folder; another table is drawn."""
+    import pandas as pd
+
+    calls = []
+    original = plots.plot_comparison
+    monkeypatch.setattr(plots, "plot_comparison", lambda table: calls.append(1) or original(table))
+    table = pd.DataFrame({"log_z": [512.25, 498.125], "log_z_se": [0.03125, 0.0625]},
+                         index=pd.Index(["electroadhesion", "electroadhesion_coulomb"], name="model"))
+    report.write_report([ea_fit], tmp_path / "a", comparison=table)
+    report.write_report([ea_fit], tmp_path / "b", comparison=table)
+    assert len(calls) == 1
+    first, copied = (tmp_path / name / "figures" / "comparison.png" for name in "ab")
+    assert _digest(first) == _digest(copied)
+    report.write_report([ea_fit], tmp_path / "c", comparison=table.assign(log_z=[512.25, 499.0]))
+    assert len(calls) == 2
