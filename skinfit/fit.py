@@ -977,7 +977,7 @@ SUMMARY_COLUMNS = ("unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk
                    "contraction", "note")
 #: Root attributes a saved fit may gain without its draws or records changing (evidence and LOO
 #: by a comparison, the stored summary): left out of content hashes such as the report's
-#: figure cache (:func:`skinfit.report.fit_hash`).
+#: figure cache (:meth:`Fit.content_hash`).
 CACHED_ATTRS = ("evidence", "loo", SUMMARY_ATTR)
 
 

@@ -288,11 +288,6 @@ _COST = {"plot_ppc": 4, "plot_trace": 3, "plot_prior_posterior": 2, "plot_pair":
 _FITS, _JOBS = [], []  # the fits and figure jobs being drawn, inherited by forked worker processes
 
 
-def fit_hash(fit):
-    """sha256 of what a fit's figures are drawn from (:meth:`skinfit.fit.Fit.content_hash`)."""
-    return fit.content_hash()
-
-
 def _code_key(func):
     """What draws a figure: the package source and plotting libraries' versions
     (:func:`skinfit.figure_store.code_hash`) and, when ``skinfit.plots.<func>`` is not skinfit's
@@ -341,7 +336,7 @@ def _init_worker(parent):
 def render_figures(fits, jobs, figdir, workers=None):
     """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits;
     func: plots function name; args; optional kwargs; path}), each once per input: a figure
-    whose fits' content (:func:`fit_hash`), function, arguments and plotting code are those
+    whose fits' content (:meth:`~skinfit.fit.Fit.content_hash`), function, arguments and plotting code are those
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
     drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
     unavailable; at most ``workers``), costliest first, unless :mod:`skinfit.figure_store`
@@ -359,7 +354,7 @@ def render_figures(fits, jobs, figdir, workers=None):
 
     def content(i):
         if i not in hashes:
-            hashes[i] = fit_hash(fits[i])
+            hashes[i] = fits[i].content_hash()
         return hashes[i]
 
     def fit_indices(job):
@@ -371,9 +366,7 @@ def render_figures(fits, jobs, figdir, workers=None):
         inputs = ",".join(f"{label}={content(i)}" for label, i in which)
         keys.append(f"{inputs}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
                     f"{_code_key(job['func'])}")
-    todo = [i for i, (job, key) in enumerate(zip(jobs, keys))
-            if manifest.get(job["path"].name) != key or not job["path"].exists()
-            or not job["path"].with_suffix(".pdf").exists()]
+    todo = [i for i, (job, key) in enumerate(zip(jobs, keys)) if not _in_folder(manifest, job["path"], key)]
     stored = {}  # job -> its key's digest in the figure store, for jobs whose fits may be stored
     for i in todo:
         for j in fit_indices(jobs[i]):
@@ -389,8 +382,7 @@ def render_figures(fits, jobs, figdir, workers=None):
     workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            for i in {i for j in todo for i in (jobs[j]["fit"].values() if isinstance(jobs[j]["fit"], dict)
-                                                 else [jobs[j]["fit"]])}:
+            for i in {i for j in todo for i in fit_indices(jobs[j])}:
                 fits[i].complete()  # each worker draws from the complete tree, computed once here
                 fits[i].summary()  # and from its summary, inherited
             plots._DPI  # noqa: B018  the plotting module and matplotlib imported once, before the fork
@@ -418,6 +410,12 @@ def render_figures(fits, jobs, figdir, workers=None):
             manifest.pop(jobs[i]["path"].name, None)
     _write_manifest(figdir, manifest)
     return errors
+
+
+def _in_folder(manifest, path, key):
+    """True when ``path`` and its PDF exist and the folder's manifest records them as drawn
+    from ``key``."""
+    return manifest.get(path.name) == key and path.exists() and path.with_suffix(".pdf").exists()
 
 
 def _manifest(figdir):
@@ -599,20 +597,16 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
                  "csv": f"{stem}.csv", "figure": None, "note": ranking_note(table)}
         path = figdir / f"{stem}.png"
         key = f"plot_comparison:{hashlib.sha256(table.to_csv().encode()).hexdigest()}:{_code_key('plot_comparison')}"
-        drawn = manifest.get(path.name) == key and path.exists() and path.with_suffix(".pdf").exists()
-        digest = hashlib.sha256(key.encode()).hexdigest()  # a table's chart is storable: nothing but the table
-        drawn = drawn or figure_store.fetch(digest, path)  # and skinfit's code draws it
-        error = None if drawn else _figure(lambda table=table: plots.plot_comparison(table), path)
+        digest = hashlib.sha256(key.encode()).hexdigest()  # always storable: drawn from the table alone
+        kept = _in_folder(manifest, path, key) or figure_store.fetch(digest, path)
+        error = None if kept else _figure(lambda table=table: plots.plot_comparison(table), path)
         if error:
             manifest.pop(path.name, None)
-        elif not drawn:
-            manifest[path.name] = key
-            figure_store.put(digest, path)
-        else:
-            manifest[path.name] = key
-        if error:
             issues_all.append({"status": "WARN", "fit": "", "where": "model comparison", "text": error})
         else:
+            if not kept:
+                figure_store.put(digest, path)
+            manifest[path.name] = key
             entry["figure"] = {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}
         comparisons.append(entry)
     if comparisons:
