@@ -2,7 +2,7 @@
 
 A report's figures are reused within its own folder (``figures/.figures.json``); this store
 keeps every drawn figure's PNG and PDF under a key made of everything the figure is drawn
-from: the fits' content (:func:`skinfit.report.fit_hash`), the plot function and its
+from: the fits' content (:meth:`skinfit.fit.Fit.content_hash`), the plot function and its
 arguments, the source of the skinfit package and the versions of the plotting libraries.
 A later report into another folder copies the files instead of drawing them again.
 
@@ -18,10 +18,7 @@ missing, partial or altered entry is drawn again. The store lives in the user ca
 import hashlib
 import json
 import os
-import shutil
-import tempfile
 from functools import lru_cache
-from importlib import metadata
 from pathlib import Path
 
 __all__ = ["store_dir", "code_hash", "storable", "fetch", "put", "trim"]
@@ -49,18 +46,12 @@ def _limit_bytes():
         return 512 * 2**20
 
 
-def _version(pkg):
-    try:
-        return metadata.version(pkg)
-    except metadata.PackageNotFoundError:
-        return "-"
-
-
 @lru_cache(maxsize=1)
 def code_hash():
     """sha256 of the skinfit package's source (:func:`skinfit.paths.source_hash`) and of the
     plotting libraries' versions: a figure drawn by other code is not reused."""
     from .paths import source_hash
+    from .report import _version
 
     doc = {"source": source_hash(), "versions": {pkg: _version(pkg) for pkg in _LIBRARIES}}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
@@ -95,23 +86,21 @@ def _entry(digest):
     return None if folder is None else folder / digest[:2] / digest
 
 
-def _sha256(path):
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def fetch(digest, png):
     """Copy the stored figure ``digest`` to ``png`` and its PDF beside it; True when done, False
     (and nothing written) when the store has no intact entry."""
+    from .checkpoint import replace_atomic
+
     entry = _entry(digest)
     if entry is None:
         return False
     try:
         meta = json.loads(entry.with_suffix(".json").read_text())
-        sources = [entry.with_suffix(s) for s in SUFFIXES]
-        if any(_sha256(src) != meta.get(s) for src, s in zip(sources, SUFFIXES)):
+        files = {s: entry.with_suffix(s).read_bytes() for s in SUFFIXES}
+        if any(hashlib.sha256(data).hexdigest() != meta.get(s) for s, data in files.items()):
             return False
-        for src, s in zip(sources, SUFFIXES):
-            _copy_atomic(src, Path(png).with_suffix(s))
+        for s, data in files.items():
+            replace_atomic(Path(png).with_suffix(s), data)
         os.utime(entry.with_suffix(".json"))  # recently used: kept longest when trimming
     except (OSError, ValueError, AttributeError):
         return False
@@ -121,17 +110,18 @@ def fetch(digest, png):
 def put(digest, png):
     """Keep the figure just drawn at ``png`` (and its PDF) under ``digest``; silent when the
     store cannot be written (a read-only or full disk costs only the reuse)."""
+    from .checkpoint import replace_atomic
+
     entry = _entry(digest)
     if entry is None:
         return
     try:
-        entry.parent.mkdir(parents=True, exist_ok=True)
         meta = {}
         for s in SUFFIXES:
-            src = Path(png).with_suffix(s)
-            meta[s] = _sha256(src)
-            _copy_atomic(src, entry.with_suffix(s))
-        _write_atomic(entry.with_suffix(".json"), json.dumps(meta).encode())  # last: marks the entry whole
+            data = Path(png).with_suffix(s).read_bytes()
+            meta[s] = hashlib.sha256(data).hexdigest()
+            replace_atomic(entry.with_suffix(s), data)
+        replace_atomic(entry.with_suffix(".json"), json.dumps(meta).encode())  # last: marks the entry whole
     except OSError:
         return
 
@@ -158,26 +148,3 @@ def trim():
         for s in (".json", *SUFFIXES):  # the mark first: a half-removed entry is never fetched
             Path(str(stem) + s).unlink(missing_ok=True)
         total -= size
-
-
-def _copy_atomic(src, dst):
-    dst = Path(dst)
-    fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=".part")
-    os.close(fd)
-    try:
-        shutil.copyfile(src, tmp)
-        os.replace(tmp, dst)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _write_atomic(dst, data):
-    fd, tmp = tempfile.mkstemp(dir=dst.parent, prefix=f".{dst.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, dst)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
