@@ -681,7 +681,7 @@ def _gaussian_density(loc, cov):
 
 def _noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None):
     """observable -> (kind, nu) and sigma (r,) in the likelihood's space."""
-    from .posterior import noise_suffix
+    from .labels import noise_suffix
 
     obs = model.observable_names
     scale = {}
@@ -891,7 +891,7 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     disc_table = None
     if discriminate:
         from dataclasses import replace as _replace
-        from .posterior import noise_suffix
+        from .labels import noise_suffix
 
         obs = model.observable_names
         problems = [_replace(problem, noise_priors=tuple(priors[f"sigma{noise_suffix(obs, o)}"] for o in obs))]

@@ -46,6 +46,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from .errors import InputError
+from .fit import as_fit
 from .units import to_si
 
 __all__ = ["plot_ppc", "ppc_bands", "plot_spec", "plot_pair", "plot_trace", "plot_rank",
@@ -80,12 +81,6 @@ def _ensure_backend():
 
 
 # ---- reading a saved fit ------------------------------------------------------------------
-def _as_fit(obj):
-    from .fit import as_fit
-
-    return as_fit(obj)
-
-
 def _card(fit):
     return tomllib.loads(fit.attrs["model_card"])
 
@@ -120,7 +115,7 @@ def parameter_units(fit):
     """Parameter (or noise parameter) name -> SI unit as stated in the model card."""
     from .labels import parameter_units as units
 
-    return units(_as_fit(fit))
+    return units(as_fit(fit))
 
 
 def _slots(fit):
@@ -252,7 +247,7 @@ def plot_spec(fit):
 
     Read from the model card's ``[plot]`` table, with defaults from the data.
     """
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     card = _card(fit)
     table = dict(card.get("plot", {}))
     cd = fit.group("constant_data")
@@ -383,7 +378,7 @@ def ppc_bands(fit):
     coverage of observed values >= 0 is unchanged). ``df.attrs["below_floor"]`` gives, per
     observable, the share of predictive draws that fell below it (0 for log-normal noise).
     """
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     spec = plot_spec(fit)
     units = _data_units(fit)
     cd = fit.group("constant_data")
@@ -560,7 +555,7 @@ def plot_ppc(fit, path=None):
 
     Returns the matplotlib Figure (written to ``path`` when given).
     """
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     bands = ppc_bands(fit)
     spec = bands.attrs["spec"]
     units = _data_units(fit)
@@ -769,7 +764,7 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
     Positive parameters on log axes (their sampling coordinate). By default every sampled
     scalar when there are at most 10, else the parameters not split by a column.
     """
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     slots = _slots(fit)
     if var_names is not None:
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
@@ -863,7 +858,7 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
     and the ranks of their draws among all draws histogrammed: flat histograms that agree
     mean the groups sample the same distribution.
     """
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     slots = _slots(fit)
     if var_names is not None:
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
@@ -927,7 +922,7 @@ def plot_rank(fit, path=None, *, var_names=None, n_groups=4, ncols=4):
     """ArviZ's (arviz-plots) rank ECDF plot, the walkers pooled into ``n_groups`` chains, in
     the report's palette, width and >= 8 pt text (bench/results/arviz_plots.md measured these
     settings against the layout rules)."""
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     _ensure_backend()
     import arviz_plots as azp
     import matplotlib as mpl
@@ -959,7 +954,7 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
     scaled to its peak; the title gives the contraction 1 - var(post)/var(prior) of
     :meth:`Fit.summary`: near 1 the data determined the parameter, near 0 the prior did.
     """
-    fit = _as_fit(fit)
+    fit = as_fit(fit)
     slots = _slots(fit)
     if var_names is not None:
         slots = [s for s in slots if s["name"] in var_names or s["base"] in var_names]
@@ -1021,7 +1016,7 @@ def _forest_rows(items, parameter):
         pairs = list(items.items())
     else:
         items = list(items) if isinstance(items, (list, tuple)) else [items]
-        fits = [i if isinstance(i, pd.DataFrame) else _as_fit(i) for i in items]
+        fits = [i if isinstance(i, pd.DataFrame) else as_fit(i) for i in items]
         datasets = {f.dataset_id for f in fits if isinstance(f, Fit)}
         models = {f.model_id for f in fits if isinstance(f, Fit)}
         pairs = []
@@ -1039,7 +1034,7 @@ def _forest_rows(items, parameter):
     pattern = re.compile(rf"^{re.escape(parameter)}(\[(.*)\])?$")
     for label, item in pairs:
         if not isinstance(item, pd.DataFrame):
-            item = _as_fit(item)
+            item = as_fit(item)
             unit = unit or parameter_units(item).get(parameter)
             table = item.summary()
             post = item.group("posterior")

@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import special
 
-from .labels import noise_suffix  # noqa: F401  (here for its old importers)
+from .labels import noise_suffix
 from .units import to_si
 
 from .errors import InputError

@@ -4,7 +4,7 @@ on first use, against numbers from outside the code that made them."""
 import numpy as np
 
 from skinfit.evidence import posterior_draws
-from skinfit.posterior import noise_suffix
+from skinfit.labels import noise_suffix
 
 
 def check_pointwise_groups(fit):
