@@ -203,20 +203,18 @@ def _analyses(fits, plan, out, seed, echo):
     drawn from, whichever report folder shows it)."""
     from .compare import compare
 
-    comparisons = {}
+    comparisons, computed = {}, set()
     for ds_id in dict.fromkeys(p["dataset"] for p in plan):
         items = [(name, f, p) for (name, f), p in zip(fits.items(), plan)
                  if p["dataset"] == ds_id and not p.get("group")]  # the competing models on the same rows
         if len(items) > 1:
-            for _, f, p in items:
-                if _comparison_records(f):  # a fit saved by an older demo: keep them with it
-                    f.save(_path(out, p))
+            computed |= {name for name, f, _ in items if _comparison_records(f)}
             comparisons[ds_id] = compare([f for _, f, _ in items])
             echo(f"\n{ds_id}: ranked by evidence\n"
                  + comparisons[ds_id][["log_z", "log_z_se", "log_bf_vs_best", "strength", "elpd_loo"]]
                  .to_string(float_format="{:.4g}".format))
-    for f, p in zip(fits.values(), plan):
-        if not f.summary_stored:  # saved before fits kept their summary table: keep it with the fit
+    for (name, f), p in zip(fits.items(), plan):
+        if name in computed or not f.summary_stored:  # saved by an older demo: keep what it lacked with it
             f.save(_path(out, p))
     from .report_groups import group_analyses
 
