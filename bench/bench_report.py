@@ -36,8 +36,7 @@ SKINFIT = [sys.executable, "-m", "skinfit"]
 
 
 def timed(args, log, env=None):
-    """(wall s, load average after) of ``skinfit ARGS``; with ``env``, also its CPU s (with
-    children) as a third value."""
+    """(wall s, CPU s with children, load average after) of ``skinfit ARGS``."""
     import os
     import resource
 
@@ -50,9 +49,17 @@ def timed(args, log, env=None):
     if out.returncode:
         raise SystemExit(f"{' '.join(args)} failed ({out.returncode}); see {log}")
     load = " ".join(f"{v:.1f}" for v in os.getloadavg())
-    if env is None:
-        return wall, load
     return wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, load
+
+
+def write_table(out, title, command, header, rows):
+    """A markdown file: title, command and time, the machine, one table of ``rows``."""
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [f"# {title}", "", f"`{command}` - {stamp}", "", machine_text(machine_info()), "",
+             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(v) for v in row) + " |" for row in rows]
+    Path(out).write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def _report_only(work, profile):
@@ -108,8 +115,8 @@ def _report_only(work, profile):
     shutil.rmtree(work / "one", ignore_errors=True)
     for what, target in (("`skinfit report` of one fit (electroadhesion), figures drawn, whole process", "< 3 s"),
                          ("the same again, figures reused", "")):
-        wall, load = timed(["report", str(one), "--out", str(work / "one")], work / "one.log")
-        rows.append((what, target, wall, "", load))
+        wall, cpu, load = timed(["report", str(one), "--out", str(work / "one")], work / "one.log")
+        rows.append((what, target, wall, f"{cpu:.1f} (whole process)", load))
     return rows
 
 
@@ -128,15 +135,10 @@ def main():
     if args.report_only:
         work.mkdir(parents=True, exist_ok=True)
         rows = _report_only(work, args.profile)
-        stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-        lines = ["# The report alone: write_report on the demo's saved fits, and a one-fit report", "",
-                 f"`.venv/bin/python bench/bench_report.py --report-only` - {stamp}", "",
-                 machine_text(machine_info()), "",
-                 "| what | target | wall s | CPU s (this process + figure workers) | load average after |",
-                 "|---|---|---|---|---|"]
-        lines += [f"| {w} | {t} | {wall:.1f} | {cpu} | {load} |" for w, t, wall, cpu, load in rows]
-        Path(args.out).write_text("\n".join(lines) + "\n")
-        print("\n".join(lines))
+        write_table(args.out, "The report alone: write_report on the demo's saved fits, and a one-fit report",
+                    ".venv/bin/python bench/bench_report.py --report-only",
+                    ("what", "target", "wall s", "CPU s (this process + figure workers)", "load average after"),
+                    [(w, t, f"{wall:.1f}", cpu, load) for w, t, wall, cpu, load in rows])
         return
     if not args.skip_fresh:
         shutil.rmtree(work, ignore_errors=True)
@@ -168,15 +170,10 @@ def main():
                  *timed(["report", str(one), "--out", str(work / "one")], work / "one.log", env)))
     rows.append(("the same again, figures reused", "< 3 s",
                  *timed(["report", str(one), "--out", str(work / "one")], work / "one2.log", env)))
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = ["# Reports and the demo: whole-process times", "",
-             f"`.venv/bin/python bench/bench_report.py{' --skip-fresh' if args.skip_fresh else ''}` - {stamp}", "",
-             machine_text(machine_info()), "",
-             "| command | target | wall s | CPU s (with children) | load average after (1, 5, 15 min) |",
-             "|---|---|---|---|---|"]
-    lines += [f"| {name} | {target} | {wall:.1f} | {cpu:.1f} | {load} |" for name, target, wall, cpu, load in rows]
-    Path(args.out).write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_table(args.out, "Reports and the demo: whole-process times",
+                f".venv/bin/python bench/bench_report.py{' --skip-fresh' if args.skip_fresh else ''}",
+                ("command", "target", "wall s", "CPU s (with children)", "load average after (1, 5, 15 min)"),
+                [(name, target, f"{wall:.1f}", f"{cpu:.1f}", load) for name, target, wall, cpu, load in rows])
 
 
 if __name__ == "__main__":
