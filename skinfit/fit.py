@@ -250,7 +250,7 @@ def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
     map_result = find_map(post, rng, n_global=n_global, n_local=n_local)
     z_map = post.to_z(map_result.theta[None])[0]
     cov = laplace_covariance(post, z_map)
-    laplace = MixtureT([0.5, 0.5], [z_map, z_map], [cov, 4 * cov])  # a wide half: FD Hessians at kinks mislead
+    laplace = MixtureT.with_wide_half(z_map, cov)
     proposal, p0, rounds = importance_start(post, laplace, nwalkers, rng)
     if p0 is None:
         p0 = initial_ball(post, z_map, cov, nwalkers, rng)

@@ -46,6 +46,13 @@ class MixtureT:
             self._log_c = gammaln(0.5 * (v + d)) - gammaln(0.5 * v) - 0.5 * d * math.log(v * math.pi)
         self._log_w = np.log(self.weights)
 
+    @classmethod
+    def with_wide_half(cls, mean, cov, nu=5.0):
+        """Equal parts of a Student-t at ``mean`` (d,) with scale ``cov`` (d, d) and one twice as
+        wide (scale 4 ``cov``): a start proposal that a too-narrow ``cov`` (a finite-difference
+        Hessian at a kink of the log density) does not leave without draws where the posterior is."""
+        return cls([0.5, 0.5], [mean, mean], [cov, 4 * np.asarray(cov)], nu)
+
     @property
     def d(self):
         return self.means.shape[1]

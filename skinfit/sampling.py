@@ -354,41 +354,41 @@ def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rou
         if best is None or ess > best[0]:
             best = (ess, proposal, x[rng.choice(size, nwalkers, replace=False, p=_floor(w, finite))])
         informative += ess >= IMPORTANCE_MIN_ESS
+        entry = {"draws": size, "ess": ess, "inside_support": int(finite.sum())}
         if informative:  # the weights say where the posterior is: population Monte Carlo
-            refit = ess < IMPORTANCE_GOOD * size and IMPORTANCE_MIN_ESS <= ess and informative < rounds
-            record.append({"draws": size, "ess": ess, "inside_support": int(finite.sum()), "refit": refit})
-            if not refit:
-                break
+            entry["refit"] = ess < IMPORTANCE_GOOD * size and IMPORTANCE_MIN_ESS <= ess and informative < rounds
+        else:  # degenerate so far: widen the proposal towards the posterior
+            entry["refit"] = len(record) < tempered
+            entry["beta"], w_beta = _tempered(log_w, finite, IMPORTANCE_MIN_ESS) if entry["refit"] else (None, None)
+        record.append(entry)
+        if not entry["refit"]:
+            break
+        if informative:
             half = size // 2
             k = select_mixture(x[:half], x[half:], COMPONENT_CHOICES, rng, train_weights=w[:half] + 1e-300,
                                test_weights=w[half:] + 1e-300, nu=proposal.nu)
             proposal = fit_mixture(x, k, rng, weights=w, nu=proposal.nu)
-            continue
-        refit = len(record) < tempered
-        beta = _temper(log_w, finite, IMPORTANCE_MIN_ESS) if refit else None
-        record.append({"draws": size, "ess": ess, "inside_support": int(finite.sum()), "refit": refit,
-                       "beta": beta})
-        if not refit:
-            break
-        one = fit_mixture(x, 1, rng, weights=np.where(finite, np.exp(beta * (log_w - log_w[finite].max())), 0.0),
-                          nu=proposal.nu)
-        proposal = MixtureT([0.5, 0.5], np.repeat(one.means, 2, axis=0), [one.covs[0], 4 * one.covs[0]], proposal.nu)
+        else:
+            one = fit_mixture(x, 1, rng, weights=w_beta, nu=proposal.nu)
+            proposal = MixtureT.with_wide_half(one.means[0], one.covs[0], proposal.nu)
     if best is None or best[0] < IMPORTANCE_MIN_ESS:
         return proposal if best is None else best[1], None, record
     return best[1], best[2], record
 
 
-def _temper(log_w, finite, target):
+def _tempered(log_w, finite, target):
     """The largest ``beta`` in [0, 1] (to 1e-3) at which the weights ``exp(beta * log_w)`` of the
     ``finite`` draws have an effective sample size of at least ``target`` (bisection: the size
-    falls as ``beta`` grows, from the number of finite draws at 0)."""
-    centred = log_w[finite] - log_w[finite].max()
+    falls as ``beta`` grows, from the number of finite draws at 0), and those weights (0 outside
+    the support; not normalised)."""
+    top = log_w[finite].max()
+    centred = log_w[finite] - top
     lo, hi = 0.0, 1.0
     while hi - lo > 1e-3:
         mid = 0.5 * (lo + hi)
         w = np.exp(mid * centred)
         lo, hi = (mid, hi) if w.sum() ** 2 / (w @ w) >= target else (lo, mid)
-    return lo
+    return lo, np.where(finite, np.exp(lo * (log_w - top)), 0.0)
 
 
 def _floor(w, finite):

@@ -167,7 +167,7 @@ def test_importance_start_widens_a_laplace_proposal_at_a_cusp(rng):
 
     target = _Cusp()
     cov = laplace_covariance(target, target.m)
-    laplace = MixtureT([0.5, 0.5], [target.m, target.m], [cov, 4 * cov])  # as fit.start builds it
+    laplace = MixtureT.with_wide_half(target.m, cov)  # as fit.start builds it
     exact = np.sqrt(2.0) * target.b
     assert np.all(np.sqrt(np.diag(target.u @ cov @ target.u.T)) < exact / 20)  # the failure this guards
     proposal, walkers, record = importance_start(target, laplace, 64, rng)
