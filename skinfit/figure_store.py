@@ -18,7 +18,6 @@ missing, partial or altered entry is drawn again. The store lives in the user ca
 import hashlib
 import json
 import os
-from functools import lru_cache
 from pathlib import Path
 
 __all__ = ["store_dir", "code_hash", "storable", "fetch", "put", "trim"]
@@ -46,15 +45,12 @@ def _limit_bytes():
         return 512 * 2**20
 
 
-@lru_cache(maxsize=1)
 def code_hash():
-    """sha256 of the skinfit package's source (:func:`skinfit.paths.source_hash`) and of the
-    plotting libraries' versions: a figure drawn by other code is not reused."""
-    from .paths import source_hash
-    from .report import _version
+    """sha256 of the skinfit package's source and of the plotting libraries' versions
+    (:func:`skinfit.paths.code_hash`): a figure drawn by other code is not reused."""
+    from .paths import code_hash as hash_of
 
-    doc = {"source": source_hash(), "versions": {pkg: _version(pkg) for pkg in _LIBRARIES}}
-    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+    return hash_of(_LIBRARIES)
 
 
 def storable(fit):

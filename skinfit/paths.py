@@ -12,9 +12,12 @@ packed into the wheel as ``skinfit/_shipped/`` and read with :mod:`importlib.res
 source checkout (``pip install -e .``) they are read in place.
 """
 
+import hashlib
+import json
 import os
 from dataclasses import dataclass
-from importlib import resources
+from functools import lru_cache
+from importlib import metadata, resources
 from pathlib import Path
 
 from .errors import InputError
@@ -139,22 +142,30 @@ def display(path: Path) -> str:
     return str(path)
 
 
+@lru_cache(maxsize=None)
 def source_hash() -> str:
     """sha256 of skinfit's own source: every .py, template and card file of the package (the
-    physics, the sampler, the plots). Keys results kept by content (the figure store, the
-    population cache), so that another skinfit never reuses them. Computed once a process."""
-    global _SOURCE_HASH
-    if _SOURCE_HASH is None:
-        import hashlib
-
-        h = hashlib.sha256()
-        root = Path(__file__).parent
-        for path in sorted(root.rglob("*")):
-            if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts:
-                h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
-        _SOURCE_HASH = h.hexdigest()
-    return _SOURCE_HASH
+    physics, the sampler, the plots). Computed once a process."""
+    h = hashlib.sha256()
+    root = Path(__file__).parent
+    for path in sorted(root.rglob("*")):
+        if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts:
+            h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
 
 
-_SOURCE_HASH = None
+def package_version(name: str) -> str:
+    """The installed version of distribution ``name``, or ``"not installed"``."""
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return "not installed"
 
+
+@lru_cache(maxsize=None)
+def code_hash(libraries: tuple[str, ...] = ()) -> str:
+    """sha256 of skinfit's source (:func:`source_hash`) and of the installed versions of
+    ``libraries``: keys results kept by content (the figure store, the population cache), so
+    that other code never reuses them."""
+    doc = {"source": source_hash(), "versions": {name: package_version(name) for name in libraries}}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()

@@ -652,17 +652,14 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
 # ---- the result kept by its inputs (population(cache=...)) -------------------------------
 def _cache_key(fits, settings):
     """sha256 of a population's inputs: subjects (label, fit content), settings, skinfit's code
-    (every module of the package) and the numpy and scipy versions."""
+    and the numpy and scipy versions (:func:`skinfit.paths.code_hash`)."""
     import hashlib
-    from importlib import metadata
 
-    from .paths import source_hash
+    from .paths import code_hash
 
-    h = hashlib.sha256(source_hash().encode())
     doc = {"format": 1, "subjects": [[label, f.content_hash()] for label, f in fits.items()],
-           "settings": settings, "versions": [metadata.version("numpy"), metadata.version("scipy")]}
-    h.update(json.dumps(doc, sort_keys=True, default=str).encode())
-    return h.hexdigest()
+           "settings": settings, "code": code_hash(("numpy", "scipy"))}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def _write_cache(path, key, result):

@@ -13,7 +13,6 @@ import json
 import math
 import re
 import sys
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +21,7 @@ import pandas as pd
 from .errors import InputError
 from .fit import _wall_time_text, as_fit
 from .labels import parameter_units
+from .paths import package_version
 from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report"]
@@ -627,7 +627,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
                "comparisons": comparisons, "across": across, "contrasts": contrast_tables,
                "designs": design_sections,
                "n_fits": len(sections), "n_converged": sum(s["converged"] for s in sections),
-               "matplotlib": _version("matplotlib"), "arviz": _version("arviz")}
+               "matplotlib": package_version("matplotlib"), "arviz": package_version("arviz")}
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
                              autoescape=True, undefined=jinja2.StrictUndefined, trim_blocks=True,
                              lstrip_blocks=True, keep_trailing_newline=True)
@@ -656,13 +656,6 @@ def ranking_note(table):
             "whatever the prior. Where they disagree, the winner by evidence is favoured as a whole-model "
             "explanation under these priors, the winner by LOO as a predictor of new rows like these; "
             "check the standard errors before reading either difference.")
-
-
-def _version(pkg):
-    try:
-        return metadata.version(pkg)
-    except metadata.PackageNotFoundError:
-        return "not installed"
 
 
 def _base(slot_name):
