@@ -58,7 +58,7 @@ def main():
         errors = []
         for job in jobs:
             t0 = time.process_time()
-            fig = getattr(plots, job["func"])(report._job_fits(job), *job["args"], **job.get("kwargs", {}))
+            fig = getattr(plots, job["func"])(*report._job_args(job), **job.get("kwargs", {}))
             t1 = time.process_time()
             pdf_time[0] = 0.0
             Figure.savefig = savefig

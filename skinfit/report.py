@@ -311,19 +311,21 @@ def _code_key(func):
     return f"{code_hash()[:16]}{own}"
 
 
-def _job_fits(job):
-    """The first argument of a job's plot function: one fit, or {label: fit} across fits."""
+def _job_args(job):
+    """The positional arguments of a job's plot function: one fit, or {label: fit} across fits,
+    before the job's ``args`` (none for a figure drawn from its ``args`` alone)."""
+    if job["fit"] is None:
+        return tuple(job["args"])
     if isinstance(job["fit"], dict):
-        return {label: _FITS[i] for label, i in job["fit"].items()}
-    return _FITS[job["fit"]]
+        return {label: _FITS[i] for label, i in job["fit"].items()}, *job["args"]
+    return _FITS[job["fit"]], *job["args"]
 
 
 def _render_one(i):
     """Draw figure job ``i`` of :data:`_JOBS` into its PNG and PDF (top level: runs in a forked
     worker, which inherits the fits and jobs, so nothing is pickled but the index)."""
     job = _JOBS[i]
-    return _figure(lambda: getattr(plots, job["func"])(_job_fits(job), *job["args"], **job.get("kwargs", {})),
-                   job["path"])
+    return _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
 
 
 def _init_worker(parent):
@@ -334,7 +336,8 @@ def _init_worker(parent):
 
 
 def render_figures(fits, jobs, figdir, workers=None):
-    """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits;
+    """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits,
+    or None for one drawn from its args alone, whose content ``inputs`` then names (a sha256);
     func: plots function name; args; optional kwargs; path}), each once per input: a figure
     whose fits' content (:meth:`~skinfit.fit.Fit.content_hash`), function, arguments and plotting code are those
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
@@ -358,12 +361,14 @@ def render_figures(fits, jobs, figdir, workers=None):
         return hashes[i]
 
     def fit_indices(job):
+        if job["fit"] is None:
+            return []
         return list(job["fit"].values()) if isinstance(job["fit"], dict) else [job["fit"]]
 
     keys = []
     for job in jobs:
         which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
-        inputs = ",".join(f"{label}={content(i)}" for label, i in which)
+        inputs = job["inputs"] if job["fit"] is None else ",".join(f"{label}={content(i)}" for label, i in which)
         keys.append(f"{inputs}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
                     f"{_code_key(job['func'])}")
     todo = [i for i, (job, key) in enumerate(zip(jobs, keys)) if not _in_folder(manifest, job["path"], key)]
@@ -565,10 +570,26 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
                          "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
 
     across = _across_fits(items, figdir, population, populations or {}, out, jobs)
+    comparisons = []
+    tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
+    for name, table in tables.items():
+        stem = "comparison" + (f"_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}" if name else "")
+        table.to_csv(out / f"{stem}.csv")
+        path = figdir / f"{stem}.png"
+        entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
+                 "csv": f"{stem}.csv", "note": ranking_note(table),
+                 "figure": {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}}
+        comparisons.append(entry)
+        # drawn from the table alone: kept (in the folder and the figure store) while it is the same
+        jobs.append({"fit": None, "inputs": hashlib.sha256(table.to_csv().encode()).hexdigest(),
+                     "func": "plot_comparison", "args": (table,), "path": path, "comparison": entry})
     for job, error in zip(jobs, render_figures([fit for _, fit in items], jobs, figdir)):
         if not error:
             continue
-        if "across" in job:  # listed at the top, the figure left out
+        if "comparison" in job:  # listed at the top, the chart left out (its table stays)
+            job["comparison"]["figure"] = None
+            issues_all.append({"status": "WARN", "fit": "", "where": "model comparison", "text": error})
+        elif "across" in job:  # listed at the top, the figure left out
             job["across"]["figures"].remove(job["entry"])
             issues_all.append({"status": "WARN", "fit": "", "where": f"{job['across']['model_id']} across fits",
                                "text": error})
@@ -586,31 +607,6 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         shown.to_csv(out / f"{stem}.csv", index=False)
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
                                 "table": _table(shown.head(20).set_index("A"), "A")})
-    from . import figure_store
-
-    comparisons, manifest = [], _manifest(figdir)  # a comparison chart is kept while its table is the same
-    tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
-    for name, table in tables.items():
-        stem = "comparison" + (f"_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}" if name else "")
-        table.to_csv(out / f"{stem}.csv")
-        entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
-                 "csv": f"{stem}.csv", "figure": None, "note": ranking_note(table)}
-        path = figdir / f"{stem}.png"
-        key = f"plot_comparison:{hashlib.sha256(table.to_csv().encode()).hexdigest()}:{_code_key('plot_comparison')}"
-        digest = hashlib.sha256(key.encode()).hexdigest()  # always storable: drawn from the table alone
-        kept = _in_folder(manifest, path, key) or figure_store.fetch(digest, path)
-        error = None if kept else _figure(lambda table=table: plots.plot_comparison(table), path)
-        if error:
-            manifest.pop(path.name, None)
-            issues_all.append({"status": "WARN", "fit": "", "where": "model comparison", "text": error})
-        else:
-            if not kept:
-                figure_store.put(digest, path)
-            manifest[path.name] = key
-            entry["figure"] = {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}
-        comparisons.append(entry)
-    if comparisons:
-        _write_manifest(figdir, manifest)
 
     design_sections = []
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/

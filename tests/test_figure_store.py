@@ -122,6 +122,7 @@ def test_a_comparison_chart_is_copied_into_a_new_report_folder(ea_fit, store, tm
 
     calls = []
     original = plots.plot_comparison
+    monkeypatch.setattr(report, "MAX_FIGURE_WORKERS", 1)  # drawn in this process, where calls are counted
     monkeypatch.setattr(plots, "plot_comparison", lambda table: calls.append(1) or original(table))
     table = pd.DataFrame({"log_z": [512.25, 498.125], "log_z_se": [0.03125, 0.0625]},
                          index=pd.Index(["electroadhesion", "electroadhesion_coulomb"], name="model"))
