@@ -60,11 +60,12 @@ def _fitting():
     from .proposal import MixtureT
     from .sampling import CHECK_EVERY, describe_moves, importance_start, initial_ball, run_emcee, sampler_settings
 
-    for name, value in dict(locals()).items():
-        if name != "g":
-            g.setdefault(name, value)
+    imported = locals()
+    for name in _FITTING_NAMES:
+        g.setdefault(name, imported[name])
 
 
+#: The names :func:`_fitting` imports (a name listed but not imported there fails every fit).
 _FITTING_NAMES = ("from_dict", "find_map", "laplace_covariance", "Posterior", "_level_labels", "PriorSet",
                   "load_priors", "MixtureT", "CHECK_EVERY", "describe_moves", "importance_start", "initial_ball",
                   "run_emcee", "sampler_settings")
@@ -667,9 +668,9 @@ class Fit:
         """sha256 of the fit's content but what is computed from it: the arrays of every group
         but those of :data:`DEFERRED` (pointwise log-likelihood and predictive draws, up to
         200 MB, functions of the posterior and the seeds in the attributes; never computed or
-        read for this), and the root attributes but :data:`CACHED_ATTRS` (evidence, LOO and
-        the stored summary, which a comparison or a save adds to a file).  Keys the report's
-        figures and the population cache."""
+        read for this) with their dimensions and attributes (units), and the root attributes but
+        :data:`CACHED_ATTRS` (evidence, LOO and the stored summary, which a comparison or a save
+        adds to a file).  Keys the stored summary, the report's figures and the population cache."""
         import hashlib
 
         h = hashlib.sha256()
@@ -677,10 +678,13 @@ class Fit:
         for name in sorted(set(tree.children) - set(DEFERRED)):
             ds = tree[name].to_dataset()
             for var in sorted(ds.variables):
-                values = ds[var].values
-                h.update(f"{name}/{var}{values.shape}".encode())
+                da = ds[var]
+                values = da.values
                 # text as text: a fit in memory holds str objects where its file gives '<U' arrays
-                h.update(repr([str(v) for v in values.ravel().tolist()]).encode() if values.dtype.kind in "OUS"
+                text = values.dtype.kind in "OUS"
+                h.update(f"{name}/{var}{da.dims}{values.shape}{'text' if text else values.dtype.str}".encode())
+                h.update(json.dumps(da.attrs, sort_keys=True, default=_plain_json).encode())
+                h.update(repr([str(v) for v in values.ravel().tolist()]).encode() if text
                          else np.ascontiguousarray(values).tobytes())
         attrs = {k: v for k, v in tree.attrs.items() if k not in CACHED_ATTRS}
         h.update(json.dumps(attrs, sort_keys=True, default=_plain_json).encode())
@@ -697,26 +701,13 @@ class Fit:
         return [s["name"] for s in self.attr("slots")]
 
     def _summary_key(self):
-        """sha256 of all :meth:`summary` is computed from: the posterior and derived draws with
-        their dimensions, level coordinates and units (hashed, ~1 ms a MB), and the root
-        attributes it reads (warnings, MAP, sampler record, slots, prior file, derived
-        quantities), with the table's format version :data:`SUMMARY_FORMAT`."""
+        """sha256 of all :meth:`summary` is computed from: the fit's content
+        (:meth:`content_hash`: draws with their dimensions, levels and units, warnings, MAP,
+        sampler record, slots, priors, derived quantities), with the table's format version
+        :data:`SUMMARY_FORMAT`."""
         import hashlib
 
-        attrs = self._tree.attrs
-        h = hashlib.sha256(f"skinfit summary {SUMMARY_FORMAT}".encode())
-        for key in ("warnings", "map", "sampler", "slots", "priors_text", "derived"):
-            h.update(f"\0{key}\0{attrs.get(key, '')}".encode())
-        for group in ("posterior", "derived"):
-            if group in self._tree.children:
-                ds = self._tree[group].to_dataset()
-                for name, da in sorted(ds.data_vars.items()):
-                    h.update(f"\0{group}/{name}{da.dims}{da.shape}{da.dtype}{da.attrs.get('units', '')}".encode())
-                    h.update(np.ascontiguousarray(da.values).tobytes())
-                    for dim in da.dims:
-                        if dim not in ("chain", "draw") and dim in ds.coords:
-                            h.update(repr(ds[dim].values.tolist()).encode())
-        return h.hexdigest()
+        return hashlib.sha256(f"skinfit summary {SUMMARY_FORMAT}\0{self.content_hash()}".encode()).hexdigest()
 
     def _compute_summary(self):
         with warnings.catch_warnings():
