@@ -59,6 +59,12 @@ _FIGURES = (  # (file name, skinfit.plots function, caption)
 )
 
 
+def file_part(text):
+    """``text`` with every run of characters other than letters, digits, ``_``, ``.`` and ``-``
+    replaced by ``_``: safe inside a file name on every platform."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
+
+
 def _fmt(value):
     """Table cell text: 6 significant digits for floats (enough to check against the CSV)."""
     if isinstance(value, (bool, np.bool_)):
@@ -118,7 +124,7 @@ def _markdown(table):
 def _key(fit, taken, label=None):
     """File-name key of a fit: model and dataset, and the options that tell two runs of them
     apart (``label`` from :func:`skinfit.run_labels.run_labels`)."""
-    base = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{label or fit.model_id}__{fit.dataset_id}").strip("_.")
+    base = file_part(f"{label or fit.model_id}__{fit.dataset_id}").strip("_.")
     key, k = base, 2
     while key in taken:
         key, k = f"{base}_{k}", k + 1
@@ -242,7 +248,7 @@ def _as_fits(fits):
         items = [(str(k), as_fit(v)) for k, v in fits.items()]
         taken, out = set(), []
         for name, f in items:
-            key = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_.") or "fit"
+            key = file_part(name).strip("_.") or "fit"
             while key in taken:
                 key += "_"
             taken.add(key)
@@ -573,7 +579,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     comparisons = []
     tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
     for name, table in tables.items():
-        stem = "comparison" + (f"_{re.sub(r'[^A-Za-z0-9_.-]+', '_', name)}" if name else "")
+        stem = "comparison" + (f"_{file_part(name)}" if name else "")
         table.to_csv(out / f"{stem}.csv")
         path = figdir / f"{stem}.png"
         entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
@@ -602,7 +608,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     for name, table in (contrasts or {}).items():
         from .report_groups import contrast_section
 
-        stem = "contrasts_" + re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_")
+        stem = "contrasts_" + file_part(name).strip("_")
         shown = contrast_section(table)
         shown.to_csv(out / f"{stem}.csv", index=False)
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
@@ -680,14 +686,14 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
     for model_id, group in by_model.items():
         if len(group) < 2:
             continue
-        safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", model_id)
+        safe = file_part(model_id)
         subj = subjects_section(dict(group))
         labelled = {subj["labels"][k]: f for k, f in group}
         if len(labelled) < len(group):  # the same subject label twice: keep the unique keys
             labelled = dict(group)
         tables = []
         for pname, table in subj["tables"].items():
-            stem = f"subjects_{safe}_{re.sub(r'[^A-Za-z0-9_.-]+', '_', pname)}"
+            stem = f"subjects_{safe}_{file_part(pname)}"
             table.to_csv(out_dir / f"{stem}.csv")
             tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": _table(table, "subject")})
         pop_result = populations.get(model_id)

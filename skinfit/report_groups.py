@@ -172,6 +172,7 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None):
 
     from .contrasts import fit_contrasts, level_contrasts
     from .errors import InputError
+    from .report import file_part
 
     by_model = {}
     for key, f in fits.items():
@@ -188,8 +189,8 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None):
 
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                cache = None if cache_dir is None else \
-                    Path(cache_dir) / f"population_{re.sub(r'[^A-Za-z0-9_.-]+', '_', f'{model_id}__{base}')}.npz"
+                stem = file_part(f"{model_id}__{base}")
+                cache = None if cache_dir is None else Path(cache_dir) / f"population_{stem}.npz"
                 populations[model_id] = population(group, names, rng=seed, cache=cache)
         except (InputError, ValueError, RuntimeError) as exc:
             if echo:
