@@ -30,26 +30,16 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import machine_info, machine_text  # noqa: E402
+from common import machine_info, machine_text, timed_skinfit  # noqa: E402
 
-SKINFIT = [sys.executable, "-m", "skinfit"]
 
 
 def timed(args, log, env=None):
     """(wall s, CPU s with children, load average after) of ``skinfit ARGS``."""
     import os
-    import resource
 
-    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    out = subprocess.run(SKINFIT + args, capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t0
-    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    log.write_text(out.stdout + out.stderr)
-    if out.returncode:
-        raise SystemExit(f"{' '.join(args)} failed ({out.returncode}); see {log}")
-    load = " ".join(f"{v:.1f}" for v in os.getloadavg())
-    return wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, load
+    wall, cpu = timed_skinfit(args, log, env)
+    return wall, cpu, " ".join(f"{v:.1f}" for v in os.getloadavg())
 
 
 def write_table(out, title, command, header, rows):

@@ -14,29 +14,19 @@ interpreter, for a before/after comparison on the same machine.  Prints one mark
 
 import argparse
 import os
-import resource
 import shutil
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
+from common import timed_skinfit  # noqa: E402
 
 
 def run(args, env, log):
     """(wall s, CPU s of the children, load average before) of ``python -m skinfit ARGS``."""
     load = os.getloadavg()[0]
-    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-m", "skinfit", *args], capture_output=True, text=True, env=env,
-                         cwd=log.parent)  # not a checkout's folder: `-m` puts the working folder first on sys.path
-    wall = time.perf_counter() - t0
-    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    log.write_text(out.stdout + out.stderr)
-    if out.returncode:
-        raise SystemExit(f"skinfit {' '.join(args)} failed ({out.returncode}); see {log}")
-    return wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime, load
+    # not a checkout's folder: `-m` puts the working folder first on sys.path
+    return (*timed_skinfit(args, log, env, cwd=log.parent), load)
 
 
 def main():

@@ -88,6 +88,22 @@ class PeakRSS:
         return False
 
 
+def timed_skinfit(args, log, env=None, cwd=None):
+    """(wall s, user + sys CPU s of the process and its children) of ``python -m skinfit ARGS``
+    as a new process; its output written to ``log``, a failure raised with it."""
+    import sys
+
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    out = subprocess.run([sys.executable, "-m", "skinfit", *args], capture_output=True, text=True, env=env, cwd=cwd)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    Path(log).write_text(out.stdout + out.stderr)
+    if out.returncode:
+        raise SystemExit(f"skinfit {' '.join(args)} failed ({out.returncode}); see {log}")
+    return wall, r1.ru_utime + r1.ru_stime - r0.ru_utime - r0.ru_stime
+
+
 def machine_info():
     """Dict of the facts a results file states about the machine and software."""
     cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
