@@ -30,25 +30,37 @@ def two_point_ratio(x, amplitude, wavelength, direction, normal_force, R, r, s, 
     All arguments broadcast (parameters as (k, 1) against rows (n,)). Returns
     ``(ratio, ok)``: ``ok`` is False where no point is loaded (``s`` too small for the
     slope) or the friction cone locks at a loaded point (``1 - mu_pm*g(x +- r) <= 0``).
-    Unloaded points contribute nothing (no 0*inf).
+    Unloaded points contribute nothing (no 0*inf). A scalar ``n == 0`` (load-independent
+    friction) skips the power.
     """
-    shift = R * np.sin(np.arctan(slope(x, amplitude, wavelength)))  # centre of pressure moves uphill
-    weights = [np.sqrt(np.clip(1.0 - ((sign * r - shift) / s) ** 2, 0.0, None)) for sign in (1.0, -1.0)]
-    terms = []
+    g0 = slope(x, amplitude, wavelength)
+    # centre of pressure moves uphill by R*sin(alpha), alpha = arctan(g0) (eq. 6), in units of s
+    shift = (R / s) * (g0 / np.sqrt(1.0 + g0 * g0))
+    half = r / s
+    weights = []
+    for sign in (1.0, -1.0):  # Hertz-like pressure at x +- r (eq. 7): sqrt(1 - ((+-r - shift)/s)^2)
+        u = sign * half - shift
+        weights.append(np.sqrt(np.maximum(1.0 - u * u, 0.0)))
     total = weights[0] + weights[1]
     ok = total > 0.0
-    safe_total = np.where(ok, total, 1.0)
+    inv_total = 1.0 / np.where(ok, total, 1.0)
+    k = 2.0 * np.pi / wavelength
+    scale = -amplitude * k
+    coulomb = np.ndim(n) == 0 and n == 0
+    mu_dir = direction * mu
+    ratio = 0.0
     for sign, w in zip((1.0, -1.0), weights):
-        share = w / safe_total                       # f_pm / f_y (eq. 8)
+        share = w * inv_total                        # f_pm / f_y (eq. 8)
         loaded = share > 0.0
-        load = np.where(loaded, share * normal_force, 1.0)
-        mu_pm = direction * mu * load**n             # eq. 12, signed by the sliding direction
-        g = slope(x + sign * r, amplitude, wavelength)
+        # eq. 12, signed by the sliding direction; an unloaded point's load is set to 1 (no 0**n)
+        mu_pm = mu_dir if coulomb else mu_dir * np.where(loaded, share * normal_force, 1.0) ** n
+        g = scale * np.sin(k * (x + sign * r))       # slope at the point (eq. 2)
         denom = 1.0 - mu_pm * g
-        ok = ok & ~(loaded & (denom <= 0.0))
-        single = (g + mu_pm) / np.where(denom > 0.0, denom, 1.0)  # one ball's ratio (eqs. 9, 11)
-        terms.append(np.where(loaded, share * single, 0.0))
-    return terms[0] + terms[1], ok
+        locked = denom <= 0.0
+        ok = ok & ~(loaded & locked)
+        single = (g + mu_pm) / np.where(locked, 1.0, denom)  # one ball's ratio (eqs. 9, 11)
+        ratio = ratio + np.where(loaded, share * single, 0.0)
+    return ratio, ok
 
 
 def _covariates(x):
