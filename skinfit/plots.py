@@ -169,8 +169,9 @@ class _InView(matplotlib.ticker.Locator):
 def _log_ticks(ax, which="x", numticks=5, sparse=False):
     """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
     on a range of less than 1.5 decades (``sparse``: at most ``numticks`` evenly spaced values
-    away from the ends, for small panels), labelled as plain numbers; no minor tick labels.
-    Only ticks in view are made (:class:`_InView`)."""
+    away from the ends, for small panels), labelled as plain numbers; unlabelled minor ticks
+    except between 1, 2, 5 x 10^k labels (making and drawing them was half of a many-panel
+    figure's drawing). Only ticks in view are made (:class:`_InView`)."""
     axis = ax.xaxis if which == "x" else ax.yaxis
     lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
     short = math.log10(hi / lo) < 1.5
@@ -181,7 +182,9 @@ def _log_ticks(ax, which="x", numticks=5, sparse=False):
         axis.set_major_locator(_InView(matplotlib.ticker.LogLocator(
             subs=(1.0, 2.0, 5.0) if short else (1.0,), numticks=3 * numticks if short else numticks)))
         axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
-    if not isinstance(axis.get_minor_locator(), _InView):  # shared axes share one locator
+    if short and not sparse:  # labelled 1, 2, 5 x 10^k: unlabelled marks between them add nothing
+        axis.set_minor_locator(matplotlib.ticker.NullLocator())
+    elif not isinstance(axis.get_minor_locator(), _InView):  # shared axes share one locator
         axis.set_minor_locator(_InView(axis.get_minor_locator()))
     axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
 

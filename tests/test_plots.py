@@ -488,6 +488,27 @@ def test_log_axis_makes_only_the_ticks_in_view():
     assert len(ax.xaxis.minorTicks) == len(minor) and len(ax.xaxis.majorTicks) == 2
 
 
+def test_short_log_axis_labels_1_2_5_and_draws_no_marks_between():
+    """Less than 1.5 decades: labelled ticks at 1, 2, 5 x 10^k and no unlabelled minor marks
+    between them; a sparse axis (small panels, evenly spaced labels) keeps its minor marks."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 3))
+    dense, sparse = fig.subplots(1, 2)
+    for ax in (dense, sparse):
+        ax.plot([0.15, 3.2], [1, 2])
+        ax.set_xscale("log")
+        ax.set_xlim(0.15, 3.2)  # 1.33 decades
+    plots._log_ticks(dense, "x")
+    plots._log_ticks(sparse, "x", 3, sparse=True)
+    FigureCanvasAgg(fig).draw()
+    np.testing.assert_allclose(dense.xaxis.get_majorticklocs(), [0.2, 0.5, 1.0, 2.0])
+    assert len(dense.xaxis.get_minorticklocs()) == 0 and not dense.xaxis.minorTicks[1:]
+    assert [t.get_text() for t in dense.get_xticklabels()] == ["0.2", "0.5", "1", "2"]
+    assert len(sparse.xaxis.get_minorticklocs()) > 5
+
+
 @pytest.mark.parametrize("name", ["ppc", "prior_posterior"])
 def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name, tmp_path):
     """The report lays each figure out once, its minor ticks left out while it is measured
