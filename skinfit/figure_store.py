@@ -25,7 +25,7 @@ __all__ = ["store_dir", "code_hash", "storable", "fetch", "put", "trim"]
 #: The suffixes of a stored figure: the PNG shown in the report and its PDF for papers.
 SUFFIXES = (".png", ".pdf")
 _LIBRARIES = ("matplotlib", "numpy", "scipy", "pandas", "xarray", "arviz-base", "arviz-stats", "arviz-plots",
-              "pillow")
+              "pillow", "pypdfium2")
 
 
 def store_dir():
