@@ -44,8 +44,6 @@ def two_point_ratio(x, amplitude, wavelength, direction, normal_force, R, r, s, 
     total = weights[0] + weights[1]
     ok = total > 0.0
     inv_total = 1.0 / np.where(ok, total, 1.0)
-    k = 2.0 * np.pi / wavelength
-    scale = -amplitude * k
     coulomb = np.ndim(n) == 0 and n == 0
     mu_dir = direction * mu
     ratio = 0.0
@@ -54,7 +52,7 @@ def two_point_ratio(x, amplitude, wavelength, direction, normal_force, R, r, s, 
         loaded = share > 0.0
         # eq. 12, signed by the sliding direction; an unloaded point's load is set to 1 (no 0**n)
         mu_pm = mu_dir if coulomb else mu_dir * np.where(loaded, share * normal_force, 1.0) ** n
-        g = scale * np.sin(k * (x + sign * r))       # slope at the point (eq. 2)
+        g = slope(x + sign * r, amplitude, wavelength)
         denom = 1.0 - mu_pm * g
         locked = denom <= 0.0
         ok = ok & ~(loaded & locked)
