@@ -170,8 +170,8 @@ def _log_ticks(ax, which="x", numticks=5, sparse=False):
     """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
     on a range of less than 1.5 decades (``sparse``: at most ``numticks`` evenly spaced values
     away from the ends, for small panels), labelled as plain numbers; unlabelled minor ticks
-    except between 1, 2, 5 x 10^k labels (making and drawing them was half of a many-panel
-    figure's drawing). Only ticks in view are made (:class:`_InView`)."""
+    except between 1, 2, 5 x 10^k labels, where they add nothing to the labels and the grid.
+    Only ticks in view are made (:class:`_InView`)."""
     axis = ax.xaxis if which == "x" else ax.yaxis
     lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
     short = math.log10(hi / lo) < 1.5

@@ -31,8 +31,13 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
     drawn = []  # per-fit figures the report process draws itself (one figure worker: in this process)
     render = report_module._render_one
     monkeypatch.setattr(report_module, "MAX_FIGURE_WORKERS", 1)
-    monkeypatch.setattr(report_module, "_render_one",
-                        lambda i: (report_module._JOBS[i]["fit"] is not None and drawn.append(i)) or render(i))
+
+    def counted(i):
+        if report_module._JOBS[i]["fit"] is not None:
+            drawn.append(i)
+        return render(i)
+
+    monkeypatch.setattr(report_module, "_render_one", counted)
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic", "--jobs", "2"]) == 0
     text = capsys.readouterr().out
