@@ -371,12 +371,14 @@ def render_figures(fits, jobs, figdir, workers=None):
             return []
         return list(job["fit"].values()) if isinstance(job["fit"], dict) else [job["fit"]]
 
-    keys = []
-    for job in jobs:
+    def inputs(job):  # what the figure is drawn from: its fits' content, or its named inputs
+        if job["fit"] is None:
+            return job["inputs"]
         which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
-        inputs = job["inputs"] if job["fit"] is None else ",".join(f"{label}={content(i)}" for label, i in which)
-        keys.append(f"{inputs}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
-                    f"{_code_key(job['func'])}")
+        return ",".join(f"{label}={content(i)}" for label, i in which)
+
+    keys = [f"{inputs(job)}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
+            f"{_code_key(job['func'])}" for job in jobs]
     todo = [i for i, (job, key) in enumerate(zip(jobs, keys)) if not _in_folder(manifest, job["path"], key)]
     stored = {}  # job -> its key's digest in the figure store, for jobs whose fits may be stored
     for i in todo:
@@ -449,8 +451,7 @@ def _write_png(fig, path):
     """The figure as a vector PDF (dense scatter rasterised), for papers, and as a PNG of that
     PDF rendered by PDFium at :data:`plots._DPI`, quantised to 256 colours (a third of the size,
     no visible change for line art). The layout is computed once (:func:`plots._fix_layout`)
-    and the figure drawn once, into the PDF: PDFium rasterises it in ~0.05 s, where Agg
-    drawing the figure again took as long as the PDF (bench/results/report.md)."""
+    and the figure drawn once, into the PDF, which PDFium rasterises (bench/results/report.md)."""
     import io
 
     import pypdfium2
