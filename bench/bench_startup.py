@@ -5,11 +5,13 @@ burst of load from other jobs hits all of them alike); the table gives the media
 minimum wall time, the median CPU time (user + sys, steadier than wall time on a shared
 machine), and the largest cumulative imports of each (``python -X importtime``).
 
-    .venv/bin/python bench/bench_startup.py [--repeats 7] [--out bench/results/startup.md]
+    .venv/bin/python bench/bench_startup.py [--repeats 7] [--out bench/results/startup.md] [--source OLD]
+
+``--source OLD`` adds the same fit run from an older checkout's package (``git archive COMMIT |
+tar -x -C OLD``, put first on PYTHONPATH), interleaved with the rest: a back-to-back comparison.
 
 ``without dask installed`` runs the same fit with ``dask`` made unimportable, as on an
-installation without the ``dask`` extra (xarray imports ``dask.array`` whenever it builds an
-array and dask is installed).  ``libraries only`` imports the third-party packages a fit
+installation without the ``dask`` extra (pint imports ``dask.base`` whenever dask is installed).  ``libraries only`` imports the third-party packages a fit
 imports, and nothing of skinfit: the floor under ``skinfit fit`` with these dependencies.
 """
 
@@ -29,12 +31,13 @@ from common import machine_info, machine_text  # noqa: E402
 PY = sys.executable
 NO_DASK = "import sys; sys.modules['dask'] = None; "
 #: the third-party packages ``skinfit fit`` imports (emcee and arviz_stats import scipy.stats,
-#: xarray imports pint and dask.array when they are installed)
+#: pint imports dask.base when dask is installed; xarray's import of dask.array is deferred by
+#: skinfit._xarray)
 LIBRARIES = ("numpy", "pandas", "xarray", "scipy.stats", "emcee", "nlopt", "h5py", "h5netcdf", "arviz_base",
-             "arviz_stats", "pint", "dask.array")
+             "arviz_stats", "pint", "dask.base")
 
 
-def commands(tmp):
+def commands(tmp, source=None):
     fit = ["fit", "electroadhesion", "electroadhesion_synthetic", "--out", str(Path(tmp) / "run"), "--seed", "1",
            "--quiet"]
     cli = "from skinfit.cli import main; sys.exit(main({!r}))"
@@ -46,7 +49,9 @@ def commands(tmp):
          [PY, "-m", "skinfit", *fit], "< 2 s"),
         ("the same fit, without dask installed", [PY, "-c", "import sys; " + NO_DASK + cli.format(fit)], "< 2 s"),
         ("libraries only: import " + ", ".join(LIBRARIES), [PY, "-c", "import " + ", ".join(LIBRARIES)], None),
-    ]
+    ] + ([] if source is None else [
+        (f"the same fit, the code in {source}",
+         ["env", f"PYTHONPATH={Path(source).resolve()}", PY, "-m", "skinfit", *fit], None)])
 
 
 def importtime(cmd, top=6):
@@ -80,10 +85,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "startup.md"))
+    ap.add_argument("--source", help="an older checkout whose fit to time beside this one's")
     args = ap.parse_args()
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
-        cmds = commands(tmp)
+        cmds = commands(tmp, args.source)
         subprocess.run(cmds[3][1], capture_output=True, check=True)  # compile .pyc files, warm the disk cache
         times = {name: [] for name, _, _ in cmds}
         cpu = {name: [] for name, _, _ in cmds}
@@ -95,8 +101,9 @@ def main():
         imports = {name: importtime(cmd) for name, cmd, _ in cmds[1:4]}
     bare = statistics.median(times["python -c pass"])
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    flags = f" --source {args.source}" if args.source else ""
     lines = ["# Start-up: whole-process wall times of skinfit's commands", "",
-             f"`.venv/bin/python bench/bench_startup.py --repeats {args.repeats}` - {stamp}", "",
+             f"`.venv/bin/python bench/bench_startup.py --repeats {args.repeats}{flags}` - {stamp}", "",
              machine_text(machine_info()), "",
              f"Load average (1, 5, 15 min) at the start: {', '.join(f'{v:.2f}' for v in load_before)}.", "",
              f"Each command run {args.repeats} times as a new process, the commands interleaved; median and "

@@ -64,7 +64,6 @@ import multiprocessing
 import os
 import resource
 import socket
-import threading
 import sys
 import time
 import warnings
@@ -76,7 +75,7 @@ import numpy as np
 import pandas as pd
 
 from ._toml import find_file, read_toml, require
-from .checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
+from .checkpoint import CheckpointLock, remove_stale_temps, replace_atomic, watch_parent
 from .data import load_dataset
 from .errors import ConvergenceWarning, InputError
 from .fit import fit
@@ -383,7 +382,7 @@ def _run_locked(campaign, scheduler, workers, echo):
             log.write(f"{_now()} run {_key(campaign.tasks[i])}\n")
         if todo and scheduler is None:
             ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_watch_parent,
+            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=watch_parent,
                                      initargs=(os.getpid(),)) as pool:
                 futures = {pool.submit(run_fit, campaign.tasks[i]): i for i in todo}
                 for fut in as_completed(futures):
@@ -435,19 +434,6 @@ def task_key(task):
     campaigns on one scheduler share a key only when they are the same fit into the same file."""
     digest = hashlib.sha256((_spec(task) + "\0" + task["path"]).encode()).hexdigest()[:32]
     return f"skinfit-fit-{task['seed']}-{digest}"
-
-
-def _watch_parent(pid, interval=0.5):
-    """In a worker process started by the campaign process ``pid``: a daemon thread that ends
-    the worker when its parent is no longer ``pid`` (the campaign was killed, even by SIGKILL,
-    and the worker re-parented), so no worker goes on writing after its campaign died."""
-
-    def watch():
-        while os.getppid() == pid:
-            time.sleep(interval)
-        os._exit(70)
-
-    threading.Thread(target=watch, name="skinfit-parent-watch", daemon=True).start()
 
 
 def _write_text(path, text):

@@ -34,6 +34,7 @@ import os
 import re
 import socket
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -442,3 +443,17 @@ class CheckpointLock:
             os.close(self._fd)
             self._fd = None
         return False
+
+
+def watch_parent(pid, interval=0.5):
+    """In a worker process started by process ``pid`` (a campaign's fit worker, a report's
+    figure worker): a daemon thread that ends the worker when its parent is no longer ``pid``
+    (the parent was killed, even by SIGKILL, and the worker re-parented), so no worker goes on
+    writing after the process that started it died."""
+
+    def watch():
+        while os.getppid() == pid:
+            time.sleep(interval)
+        os._exit(70)
+
+    threading.Thread(target=watch, name="skinfit-parent-watch", daemon=True).start()

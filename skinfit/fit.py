@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
+from ._xarray import defer_imports
 from .data import Dataset, as_dataset
 from .labels import annotate
 from .units import si_unit
@@ -41,6 +42,8 @@ from .models import Model, load_model
 from .guardrails import check_run
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator"]
+
+defer_imports()
 
 
 def _fitting():
@@ -810,7 +813,7 @@ class Fit:
                           f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)
         dask = sys.modules.get("dask")  # in a Dask worker xarray would take a distributed lock named by the target
         with (dask.config.set(scheduler="synchronous") if dask is not None else nullcontext()), \
-                _distributed_unimported():
+                _dask_unimported():
             data = tree.to_netcdf(engine="h5netcdf")
         free = shutil.disk_usage(path.parent).free
         if free < data.nbytes + (1 << 20):
@@ -843,21 +846,22 @@ class Fit:
 
 
 @contextmanager
-def _distributed_unimported():
-    """While a process that has not imported Dask's ``distributed`` writes a fit: that package
-    unimportable (as without the ``dask`` extra).  xarray's netCDF writer imports it (0.4-0.8 s)
-    only to ask whether the active Dask scheduler is a distributed Client, and none can be in
-    a process that has not imported it; the file written is the same.  Another thread that
-    imports ``distributed`` meanwhile gets an ImportError."""
-    if "distributed" in sys.modules:  # imported (a Dask worker, a Client), or made unimportable by someone else
+def _dask_unimported():
+    """While a process that has not imported Dask (or not its ``distributed``) writes a fit:
+    that package unimportable (as without the ``dask`` extra).  xarray's netCDF writer imports
+    them (0.1-0.8 s) only to ask which Dask scheduler is active, and none can be in a process
+    that has not imported them: the answer "none" gives the same lock, and the file written is
+    the same.  Another thread that imports the package meanwhile gets an ImportError."""
+    name = next((n for n in ("dask", "distributed") if n not in sys.modules), None)
+    if name is None:  # both imported (a Dask worker, a Client), or made unimportable by someone else
         yield
         return
-    sys.modules["distributed"] = None
+    sys.modules[name] = None
     try:
         yield
     finally:
-        if "distributed" in sys.modules and sys.modules["distributed"] is None:
-            del sys.modules["distributed"]
+        if name in sys.modules and sys.modules[name] is None:
+            del sys.modules[name]
 
 
 def as_fit(obj) -> Fit:

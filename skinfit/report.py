@@ -336,9 +336,9 @@ def _render_one(i):
 
 def _init_worker(parent):
     """A figure worker ends when the report process that forked it dies (even by SIGKILL)."""
-    from .campaign import _watch_parent
+    from .checkpoint import watch_parent  # not campaign's: that imports the fitting machinery
 
-    _watch_parent(parent)
+    watch_parent(parent)
 
 
 def render_figures(fits, jobs, figdir, workers=None):
