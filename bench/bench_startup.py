@@ -11,7 +11,7 @@ machine), and the largest cumulative imports of each (``python -X importtime``).
 tar -x -C OLD``, put first on PYTHONPATH), interleaved with the rest: a back-to-back comparison.
 
 ``without dask installed`` runs the same fit with ``dask`` made unimportable, as on an
-installation without the ``dask`` extra (pint imports ``dask.base`` whenever dask is installed).  ``libraries only`` imports the third-party packages a fit
+installation without the ``dask`` extra (the fit imports neither: the row checks that).  ``libraries only`` imports the third-party packages a fit
 imports, and nothing of skinfit: the floor under ``skinfit fit`` with these dependencies.
 """
 
@@ -30,11 +30,10 @@ from common import machine_info, machine_text  # noqa: E402
 
 PY = sys.executable
 NO_DASK = "import sys; sys.modules['dask'] = None; "
-#: the third-party packages ``skinfit fit`` imports (emcee and arviz_stats import scipy.stats,
-#: pint imports dask.base when dask is installed; xarray's import of dask.array is deferred by
-#: skinfit._xarray)
+#: the third-party packages ``skinfit fit`` imports (emcee and arviz_stats import scipy.stats;
+#: xarray's imports of dask and pint are deferred by skinfit._xarray until something uses them)
 LIBRARIES = ("numpy", "pandas", "xarray", "scipy.stats", "emcee", "nlopt", "h5py", "h5netcdf", "arviz_base",
-             "arviz_stats", "pint", "dask.base")
+             "arviz_stats")
 
 
 def commands(tmp, source=None):
@@ -54,9 +53,9 @@ def commands(tmp, source=None):
          ["env", f"PYTHONPATH={Path(source).resolve()}", PY, "-m", "skinfit", *fit], None)])
 
 
-def importtime(cmd, top=6):
+def importtime(cmd, cwd, top=6):
     """The largest cumulative top-level imports of a command (``-X importtime``), in ms."""
-    out = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], capture_output=True, text=True).stderr
+    out = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], capture_output=True, text=True, cwd=cwd).stderr
     rows = []
     for line in out.splitlines():
         parts = line.split("|")
@@ -68,10 +67,11 @@ def importtime(cmd, top=6):
     return sorted(rows, reverse=True)[:top]
 
 
-def run(cmd):
-    """(wall s, CPU s = user + sys) of one run of ``cmd`` as a child process."""
+def run(cmd, cwd):
+    """(wall s, CPU s = user + sys) of one run of ``cmd`` as a child process in folder ``cwd``
+    (not this checkout, whose ``skinfit`` folder ``-m``/``-c`` would put first on the path)."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=cwd)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -90,15 +90,15 @@ def main():
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         cmds = commands(tmp, args.source)
-        subprocess.run(cmds[3][1], capture_output=True, check=True)  # compile .pyc files, warm the disk cache
+        subprocess.run(cmds[3][1], capture_output=True, check=True, cwd=tmp)  # compile .pyc files, warm the disk cache
         times = {name: [] for name, _, _ in cmds}
         cpu = {name: [] for name, _, _ in cmds}
         for _ in range(args.repeats):
             for name, cmd, _ in cmds:
-                wall, used = run(cmd)
+                wall, used = run(cmd, tmp)
                 times[name].append(wall)
                 cpu[name].append(used)
-        imports = {name: importtime(cmd) for name, cmd, _ in cmds[1:4]}
+        imports = {name: importtime(cmd, tmp) for name, cmd, _ in cmds[1:4]}
     bare = statistics.median(times["python -c pass"])
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     flags = f" --source {args.source}" if args.source else ""
