@@ -41,7 +41,7 @@ def test_public_names_resolve_lazily_to_the_functions_not_the_submodules():
     subprocess.run([sys.executable, "-c", "import sys\n" + code], check=True)
 
 
-def test_skinfit_fit_builds_no_unit_registry_and_leaves_distributed_alone(tmp_path):
+def test_skinfit_fit_builds_no_unit_registry_and_imports_no_dask_or_pint(tmp_path):
     """``skinfit fit`` of the shipped electroadhesion dataset (units V and mN): the units are read
     without pint's UnitRegistry, and neither Dask nor pint is imported: not by xarray's writer
     (to look for a scheduler), nor by xarray's first array (for their array types);
