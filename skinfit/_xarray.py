@@ -29,7 +29,8 @@ class _UntilImported:
         from xarray.namedarray.pycompat import DuckArrayModule
 
         real = DuckArrayModule(self._name)
-        self._cache[self._name] = real
+        if real.available or sys.modules.get(self._name, ...) is not None:  # not blocked for a moment
+            self._cache[self._name] = real  # (Fit.save: sys.modules["dask"] = None while it writes)
         return real
 
     @property
@@ -59,8 +60,10 @@ def defer_imports():
     :func:`_collection_check` in place of its ``is_dask_collection``, once per process. Where
     this xarray has no such names (or already looked a module up), it imports as before:
     slower, not different."""
-    from xarray.namedarray import pycompat, utils
-
+    try:
+        from xarray.namedarray import pycompat, utils
+    except ImportError:  # an xarray laid out otherwise
+        return
     cache = getattr(pycompat, "_cached_duck_array_modules", None)
     if isinstance(cache, dict) and hasattr(pycompat, "DuckArrayModule"):
         for name, (module, _) in _TYPES.items():
