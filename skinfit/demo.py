@@ -54,10 +54,11 @@ def demo_plan(seed):
                      if p in load_model(model_id).parameter_names}
             key = zlib.crc32(f"{ds_id}/{model_id}".encode())
             fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
+            rows = options.get("rows", {})
             plan.append({"dataset": ds_id, "model": model_id, "seed": fit_seed, "split": split,
-                         "rows": options.get("rows", {}), "n_rows": len(_select(ds, options.get("rows", {}))),
-                         "why": options.get("why", ""),
-                         "max_steps": options.get("max_steps", {}).get(model_id, 20000)})
+                         "rows": rows, "n_rows": len(_select(ds, rows)), "why": options.get("why", ""),
+                         "max_steps": options.get("max_steps", {}).get(model_id, 20000),
+                         "sha256": _inputs(ds, model_id, rows)})
         if options.get("by"):  # the dataset's model on every other group too (``group`` set)
             col = options["by"]
             first = str(options.get("rows", {}).get(col))
@@ -68,8 +69,20 @@ def demo_plan(seed):
                 fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
                 plan.append({"dataset": ds_id, "model": ds.model, "seed": fit_seed, "split": {},
                              "rows": {col: level}, "n_rows": len(_select(ds, {col: level})), "why": "",
-                             "group": f"{col}={level}", "max_steps": 20000})
+                             "group": f"{col}={level}", "max_steps": 20000,
+                             "sha256": _inputs(ds, ds.model, {col: level})})
     return plan
+
+
+def _inputs(ds, model_id, rows):
+    """The sha256 of a plan item's data (its rows of ``ds``), model card and prior file, as
+    this process finds them: a saved fit is reused, and a worker's fit kept, only when made
+    from these."""
+    from .models import load_model
+    from .priors import load_priors
+
+    return {"dataset": _select(ds, rows).sha256, "model": load_model(model_id).sha256,
+            "priors": load_priors(model_id).sha256}
 
 
 def _path(out, item):
@@ -96,8 +109,16 @@ def _run_one(item, path):
     from .data import load_dataset
     from .fit import fit
 
+    from .errors import InputError
+
     t0 = time.perf_counter()
-    ds = _select(load_dataset(item["dataset"]), item["rows"])
+    full = load_dataset(item["dataset"])
+    found = _inputs(full, item["model"], item["rows"])
+    if found != item["sha256"]:  # another search path (a spawned worker without --path) or an edited card
+        which = ", ".join(k for k in found if found[k] != item["sha256"][k])
+        raise InputError(item["dataset"], f"the fit worker found other {which} for {item['model']} than the demo "
+                                          "planned with; nothing was fitted")
+    ds = _select(full, item["rows"])
     result = fit(item["model"], ds, rng=item["seed"], split=item["split"] or None,
                  max_steps=item["max_steps"])
     if not item.get("group"):  # a compared fit (see run_demo)
@@ -118,27 +139,20 @@ def _comparison_records(fit):
     return not had
 
 
-def _reuse(path, item, datasets):
-    """The saved fit of this item, when it has the item's seed and was made on the same data,
-    model card, priors and sampler settings; else None (an edited file, or another sampler,
-    and the item is fitted again). ``datasets`` caches the loaded datasets by id."""
+def _reuse(path, item):
+    """The saved fit of this item, when it has the item's seed and was made on the data, model
+    card and priors the item was planned with (their sha256) and the same sampler settings; else
+    None (an edited file, or another sampler, and the item is fitted again)."""
     if not path.exists():
         return None
-    from .data import load_dataset
     from .fit import load_fit
-    from .models import load_model
-    from .priors import load_priors
     from .sampling import sampler_settings
 
     try:
         saved = load_fit(path)
         attrs = saved.attrs
-        if item["dataset"] not in datasets:
-            datasets[item["dataset"]] = load_dataset(item["dataset"])
-        data = _select(datasets[item["dataset"]], item["rows"])
-        same = (int(attrs.get("seed", -1)) == item["seed"] and attrs.get("dataset_sha256") == data.sha256
-                and attrs.get("model_sha256") == load_model(item["model"]).sha256
-                and attrs.get("priors_sha256") == load_priors(item["model"]).sha256
+        same = (int(attrs.get("seed", -1)) == item["seed"]
+                and all(attrs.get(f"{k}_sha256") == v for k, v in item["sha256"].items())
                 and saved.attr("sampler").get("settings") == sampler_settings())
     except Exception:  # a damaged or foreign file: fit again
         return None
@@ -148,13 +162,13 @@ def _reuse(path, item, datasets):
 def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, datasets=None, echo=print):
     """Fit, compare and report every shipped dataset; returns the report's index.html path."""
     from .fit import load_fit
+    from .paths import explicit_search_path, set_search_path
     from .report import write_report
 
     out = Path(out)
     plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]
     paths = [_path(out, p) for p in plan]
-    loaded = {}
-    reused = [_reuse(path, p, loaded) for p, path in zip(plan, paths)]
+    reused = [_reuse(path, p) for p, path in zip(plan, paths)]
     todo = [(p, path) for p, path, f in zip(plan, paths, reused) if f is None]
     todo.sort(key=lambda t: -t[0]["n_rows"])  # larger fits first: the workers finish together
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
@@ -167,7 +181,10 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     with ExitStack() as stack:
         drawing = []  # each new fit's report figures, drawn into the figure store by the fit workers
         if todo:    # while this process loads the fits, compares them and runs the population
-            pool = stack.enter_context(ProcessPoolExecutor(max_workers=jobs))
+            # workers started by spawn or forkserver (macOS; Linux from Python 3.14) inherit no
+            # --path: given it, they find the cards this process planned with (checked: _run_one)
+            pool = stack.enter_context(ProcessPoolExecutor(max_workers=jobs, initializer=set_search_path,
+                                                           initargs=(explicit_search_path(),)))
             futures = {pool.submit(_run_one, p, path): (p, path) for p, path in todo}
             n_of_model = Counter(p["model"] for p in plan)
             for fut in as_completed(futures):

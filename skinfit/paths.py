@@ -22,7 +22,7 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path",
+__all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path", "explicit_search_path",
            "shipped_root", "user_root"]
 
 KINDS = ("models", "priors", "datasets")
@@ -52,6 +52,12 @@ class Entry:
 def set_search_path(folders) -> None:
     """Put ``folders`` (paths) first on the search path, for this process."""
     _EXPLICIT[:] = [Path(f).expanduser() for f in folders]
+
+
+def explicit_search_path() -> list[Path]:
+    """The folders :func:`set_search_path` put first: what a worker process started by spawn
+    or forkserver (which inherits no module state) must be given to find the same cards."""
+    return list(_EXPLICIT)
 
 
 def shipped_root() -> Path | None:

@@ -69,4 +69,57 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(sampling, "TAU_KEEP", 5.0)
     item = next(p for p in plan if p["model"] == "electroadhesion")
-    assert demo._reuse(out / item["dataset"] / item["model"] / "fit.nc", item, {}) is None
+    assert demo._reuse(out / item["dataset"] / item["model"] / "fit.nc", item) is None
+
+
+_SPAWNED_DEMO = """
+import multiprocessing, sys
+from skinfit.cli import main
+if __name__ == "__main__":
+    multiprocessing.set_start_method(sys.argv[1], force=True)
+    sys.exit(main(["--path", sys.argv[2], "demo", "--dataset", "electroadhesion_synthetic", "--jobs", "2",
+                   "--out", sys.argv[3]]))
+"""
+
+
+def test_demo_workers_started_by_spawn_fit_the_data_found_through_path(tmp_path):
+    """``--path`` puts a user's folder first; a user's dataset there shadows the shipped one of the
+    same id. Fit workers started by spawn (macOS; forkserver on Linux from Python 3.14) inherit no
+    module state, and used to fit the shipped data while the demo planned with the user's: every
+    fit must be made on the user's 120 rows, not the shipped 216."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    shipped = skinfit.load_dataset("electroadhesion_synthetic")
+    user = tmp_path / "mine" / "datasets" / "electroadhesion_synthetic"
+    user.mkdir(parents=True)
+    card = skinfit.paths.locate("datasets", "electroadhesion_synthetic")
+    shutil.copy(card, user / "dataset.toml")
+    lines = (card.parent / "data.csv").read_text().splitlines()
+    (user / "data.csv").write_text("\n".join(lines[:121]) + "\n")  # the header and the first 120 rows
+    script = tmp_path / "spawned_demo.py"
+    script.write_text(_SPAWNED_DEMO)
+    out = tmp_path / "demo"
+    subprocess.run([sys.executable, str(script), "spawn", str(tmp_path / "mine"), str(out)], check=True,
+                   capture_output=True, env={**os.environ, "MPLBACKEND": "Agg"})
+    mine = skinfit.load_dataset(user)
+    assert mine.sha256 != shipped.sha256 and len(mine) == 120
+    for model in ("electroadhesion", "electroadhesion_coulomb", "electroadhesion_empirical"):
+        fit = skinfit.load_fit(out / "electroadhesion_synthetic" / model / "fit.nc")
+        assert fit.attrs["dataset_sha256"] == mine.sha256, model
+        assert fit.idata["observed_data"].sizes["obs_id"] == 120
+
+
+def test_a_fit_worker_that_finds_other_inputs_than_planned_fits_nothing(tmp_path):
+    from skinfit import demo
+    from skinfit.errors import InputError
+
+    item = next(p for p in demo_plan(seed=1) if p["model"] == "electroadhesion_coulomb")
+    path = tmp_path / "fit.nc"
+    for which in ("dataset", "model", "priors"):
+        other = dict(item, sha256=dict(item["sha256"], **{which: "0" * 64}))
+        with pytest.raises(InputError, match=rf"the fit worker found other {which} for electroadhesion_coulomb"):
+            demo._run_one(other, path)
+        assert not path.exists()
