@@ -107,9 +107,8 @@ def _run_one(item, path):
     level: runs in a worker process, so these costs are spread over the workers too)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from .data import load_dataset
-    from .fit import fit
-
     from .errors import InputError
+    from .fit import fit
 
     t0 = time.perf_counter()
     full = load_dataset(item["dataset"])
