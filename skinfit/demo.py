@@ -55,10 +55,11 @@ def demo_plan(seed):
             key = zlib.crc32(f"{ds_id}/{model_id}".encode())
             fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
             rows = options.get("rows", {})
+            data = _select(ds, rows)
             plan.append({"dataset": ds_id, "model": model_id, "seed": fit_seed, "split": split,
-                         "rows": rows, "n_rows": len(_select(ds, rows)), "why": options.get("why", ""),
+                         "rows": rows, "n_rows": len(data), "why": options.get("why", ""),
                          "max_steps": options.get("max_steps", {}).get(model_id, 20000),
-                         "sha256": _inputs(ds, model_id, rows)})
+                         "sha256": _inputs(data, model_id)})
         if options.get("by"):  # the dataset's model on every other group too (``group`` set)
             col = options["by"]
             first = str(options.get("rows", {}).get(col))
@@ -67,21 +68,21 @@ def demo_plan(seed):
                     continue
                 key = zlib.crc32(f"{ds_id}/{ds.model}/{col}={level}".encode())
                 fit_seed = int(np.random.SeedSequence([seed, key]).generate_state(1)[0])
+                data = _select(ds, {col: level})
                 plan.append({"dataset": ds_id, "model": ds.model, "seed": fit_seed, "split": {},
-                             "rows": {col: level}, "n_rows": len(_select(ds, {col: level})), "why": "",
-                             "group": f"{col}={level}", "max_steps": 20000,
-                             "sha256": _inputs(ds, ds.model, {col: level})})
+                             "rows": {col: level}, "n_rows": len(data), "why": "",
+                             "group": f"{col}={level}", "max_steps": 20000, "sha256": _inputs(data, ds.model)})
     return plan
 
 
-def _inputs(ds, model_id, rows):
-    """The sha256 of a plan item's data (its rows of ``ds``), model card and prior file, as
+def _inputs(data, model_id):
+    """The sha256 of a plan item's data (its selected rows), model card and prior file, as
     this process finds them: a saved fit is reused, and a worker's fit kept, only when made
     from these."""
     from .models import load_model
     from .priors import load_priors
 
-    return {"dataset": _select(ds, rows).sha256, "model": load_model(model_id).sha256,
+    return {"dataset": data.sha256, "model": load_model(model_id).sha256,
             "priors": load_priors(model_id).sha256}
 
 
@@ -111,13 +112,12 @@ def _run_one(item, path):
     from .fit import fit
 
     t0 = time.perf_counter()
-    full = load_dataset(item["dataset"])
-    found = _inputs(full, item["model"], item["rows"])
+    ds = _select(load_dataset(item["dataset"]), item["rows"])
+    found = _inputs(ds, item["model"])
     if found != item["sha256"]:  # another search path (a spawned worker without --path) or an edited card
         which = ", ".join(k for k in found if found[k] != item["sha256"][k])
         raise InputError(item["dataset"], f"the fit worker found other {which} for {item['model']} than the demo "
                                           "planned with; nothing was fitted")
-    ds = _select(full, item["rows"])
     result = fit(item["model"], ds, rng=item["seed"], split=item["split"] or None,
                  max_steps=item["max_steps"])
     if not item.get("group"):  # a compared fit (see run_demo)

@@ -459,9 +459,10 @@ def _write_png(fig, path):
 
     fig.set_dpi(plots._DPI)
     plots._fix_layout(fig)
-    pdf = io.BytesIO()
-    fig.savefig(pdf, format="pdf")
-    document = pypdfium2.PdfDocument(pdf.getvalue())
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="pdf")
+    pdf = buffer.getvalue()
+    document = pypdfium2.PdfDocument(pdf)
     page = document[0]
     try:  # convert: a copy, independent of PDFium's bitmap
         image = page.render(scale=plots._DPI / 72).to_pil().convert("RGB")
@@ -470,7 +471,7 @@ def _write_png(fig, path):
         document.close()
     image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
         path, format="PNG", compress_level=6)
-    Path(path).with_suffix(".pdf").write_bytes(pdf.getvalue())
+    Path(path).with_suffix(".pdf").write_bytes(pdf)
 
 
 def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
