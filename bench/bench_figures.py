@@ -7,8 +7,8 @@ first when absent, not timed) and, in place of the report's parallel figure work
 the report's figure jobs one by one in this process: per figure the CPU seconds
 (``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig``), and the rest
 of ``report._write_png`` (the "PNG" column: the layout, the PNG rendered from the PDF by PDFium,
-quantised and written; before PDFium, Agg drawing the PNG). Prints the total, the total per plot function and the costliest figures; ``--json``
-keeps every row (for a before/after comparison). The figures are written under
+quantised and written; before PDFium, Agg drawing the PNG). Prints the total, the total per plot
+function and the costliest figures; ``--json`` keeps every row (for a before/after comparison). The figures are written under
 ``--work``/report/figures, to be looked at.
 """
 

@@ -11,8 +11,9 @@ machine), and the largest cumulative imports of each (``python -X importtime``).
 tar -x -C OLD``, put first on PYTHONPATH), interleaved with the rest: a back-to-back comparison.
 
 ``without dask installed`` runs the same fit with ``dask`` made unimportable, as on an
-installation without the ``dask`` extra (the fit imports neither: the row checks that).  ``libraries only`` imports the third-party packages a fit
-imports, and nothing of skinfit: the floor under ``skinfit fit`` with these dependencies.
+installation without the ``dask`` extra (the fit imports neither: the row checks that).
+``libraries only`` imports the third-party packages a fit imports, and nothing of skinfit: the
+floor under ``skinfit fit`` with these dependencies.
 """
 
 import argparse

@@ -35,7 +35,7 @@ set -x
 "$SK" fit electroadhesion electroadhesion_synthetic --out X --seed 1 --quiet | tail -n 3
 test -s X/fit.nc
 "$SK" report X --out R | tail -n 1
-test -s R/index.html && ls R/figures/*.png R/figures/*.pdf | wc -l
+test -s R/index.html && test "$(ls R/figures/*.png R/figures/*.pdf | wc -l)" -eq 8  # 4 figures of one fit, PNG + PDF
 ! grep -q "could not be drawn" R/index.html
 set +x
 cd "$ROOT"
