@@ -8,6 +8,7 @@ Every section names the model card, prior file and dataset (with hashes) and the
 version that produced it. Reads only saved results.
 """
 
+import contextlib
 import hashlib
 import json
 import math
@@ -334,6 +335,25 @@ def _render_one(i):
     return _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
 
 
+@contextlib.contextmanager
+def _frozen_heap():
+    """While figure workers are forked and drawing: the objects this process holds (fits,
+    modules) moved out of the garbage collector's view (``gc.freeze``), so that the workers'
+    collections do not walk them again and again, copying the pages they touch (measured in
+    bench/results/report.md). Put back afterwards, unless the caller had frozen objects itself
+    (then its own choice is kept)."""
+    import gc
+
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
 def _init_worker(parent):
     """A figure worker ends when the report process that forked it dies (even by SIGKILL)."""
     from .checkpoint import watch_parent  # not campaign's: that imports the fitting machinery
@@ -402,8 +422,8 @@ def render_figures(fits, jobs, figdir, workers=None):
             import matplotlib.backends.backend_pdf  # noqa: F401
             import PIL.PngImagePlugin  # noqa: F401
 
-            with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
-                                     initializer=_init_worker, initargs=(os.getpid(),)) as pool:
+            with _frozen_heap(), ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
+                                                     initializer=_init_worker, initargs=(os.getpid(),)) as pool:
                 for i, error in zip(todo, pool.map(_render_one, todo)):
                     errors[i] = error
         else:

@@ -341,3 +341,34 @@ def test_figure_workers_end_when_the_report_process_is_killed(ea_fit, tmp_path):
     for pid in survivors:  # leave nothing behind, then fail
         os.kill(pid, signal.SIGKILL)
     assert not survivors, f"figure workers {survivors} outlived their report process"
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(), reason="needs fork")
+def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path, monkeypatch):
+    """The report freezes this process's objects while its forked workers draw, and unfreezes
+    them after, so nothing it held stays out of the collector's reach (a leak in a long
+    session); objects the caller had frozen itself stay frozen."""
+    import concurrent.futures
+    import gc
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)  # forked figure workers even on one core
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")
+    frozen = []  # objects frozen when the workers are started
+
+    class Recording(concurrent.futures.ProcessPoolExecutor):
+        def __init__(self, *args, **kwargs):
+            frozen.append(gc.get_freeze_count())
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", Recording)
+    assert gc.get_freeze_count() == 0
+    report.write_report(ea_fit, tmp_path / "a")
+    assert len(frozen) == 1 and frozen[0] > 10_000  # the workers were forked from a frozen heap
+    assert gc.get_freeze_count() == 0
+    gc.freeze()
+    try:
+        mine = gc.get_freeze_count()
+        report.write_report(ea_fit, tmp_path / "b")
+        assert gc.get_freeze_count() > 0.9 * mine > 0  # not unfrozen (a frozen object freed leaves the count)
+    finally:
+        gc.unfreeze()
