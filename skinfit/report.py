@@ -663,10 +663,20 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).parent / "templates"),
                              autoescape=True, undefined=jinja2.StrictUndefined, trim_blocks=True,
                              lstrip_blocks=True, keep_trailing_newline=True)
+    env.filters["wbr"] = _break_at_underscores
     index = out / "index.html"
     index.write_text(env.get_template("report.html.j2").render(**context), encoding="utf-8")
     (out / "summary.md").write_text(_summary_md(context), encoding="utf-8")
     return index
+
+
+def _break_at_underscores(value):
+    """A table cell's text, escaped, with a line-break opportunity (``<wbr>``) after each
+    underscore: a narrow column breaks ``contact_area_no_levitation`` between its words, not
+    inside one."""
+    from markupsafe import Markup, escape
+
+    return escape(value).replace("_", Markup("_<wbr>"))
 
 
 def ranking_note(table):

@@ -372,3 +372,15 @@ def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path, mo
         assert gc.get_freeze_count() > 0.9 * mine > 0  # not unfrozen (a frozen object freed leaves the count)
     finally:
         gc.unfreeze()
+
+
+def test_table_names_break_at_their_underscores_and_stay_escaped(written):
+    """A table cell gets a line-break opportunity after each underscore, so a narrow column
+    breaks ``electroadhesion_coulomb`` between its words (the cell's text is unchanged for a
+    reader or a parser), and the text is still escaped: a name cannot inject markup."""
+    index, _ = written
+    html = index.read_text(encoding="utf-8")
+    assert '<td class="text">electroadhesion_<wbr>coulomb</td>' in html
+    assert ">log_<wbr>z_<wbr>se</th>" in html
+    assert "electroadhesion_coulomb" in _frame(_parse(index).tables[("comparison", "comparison.csv")]).index
+    assert str(report._break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
