@@ -38,6 +38,7 @@ from pathlib import Path
 
 import matplotlib
 import matplotlib.colors
+import matplotlib.layout_engine
 import matplotlib.ticker
 import numpy as np
 import pandas as pd
@@ -718,12 +719,22 @@ def _noise(fit, observable):
 
 
 def _wrap(text, ax, fontsize=MIN_FONT + 1):
-    """Panel title wrapped to its axes' width (at ~0.6 em a character), line by line."""
+    """Panel title wrapped to its axes' width (at ~0.6 em a character), line by line. Under
+    constrained layout the width is the axes' share of the figure less ~0.8 in of outer
+    margins and 0.1 in between panels (the default subplot margins it has before the layout
+    runs are wider, and wrapped "angle = 0 deg" as "angle = 0" / "deg"); a number is never
+    parted from the words on either side ("= 0 deg", "contraction 1.00")."""
     import textwrap
 
-    width_in = ax.get_position().width * ax.figure.get_figwidth()
+    fig = ax.figure
+    width_in = ax.get_position().width * fig.get_figwidth()
+    spec = ax.get_subplotspec()
+    if spec is not None and isinstance(fig.get_layout_engine(), matplotlib.layout_engine.ConstrainedLayoutEngine):
+        share = (spec.colspan.stop - spec.colspan.start) / spec.get_gridspec().ncols
+        width_in = max(width_in, (fig.get_figwidth() - 0.8) * share - 0.1)
     per_line = max(12, int(width_in * 72 / (0.6 * fontsize)))
-    return "\n".join(w for line in text.split("\n") for w in textwrap.wrap(line, per_line))
+    bound = re.sub(r"(?<=\S) (?=[-+]?\.?\d)|(?<=\d) (?=\S)", "\u00a0", text)  # a number stays with its neighbours
+    return "\n".join(w for line in bound.split("\n") for w in textwrap.wrap(line, per_line)).replace("\u00a0", " ")
 
 
 def _draw_pair_row(fit, axes, cells, pair, spec, units, panel, colour, curves, palette):

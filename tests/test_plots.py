@@ -531,3 +531,24 @@ def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name
                                [ax.get_position().bounds for ax in ref.axes], atol=1e-9)
     assert (tmp_path / "f.pdf").read_bytes()[:5] == b"%PDF-"
     assert not layout_problems(fig)
+
+
+def test_panel_titles_wrap_to_the_laid_out_width_and_keep_numbers_with_their_units():
+    """A panel title is wrapped for the width constrained layout will give its axes (the
+    ultrasonic checks' 4 columns on 9.4 in: "direction angle = 0 deg" fits one line), and where
+    it must wrap, a number stays on the line of the words beside it (its unit after it, the
+    "=" or the word before it)."""
+    from matplotlib.figure import Figure
+
+    title = "direction angle = 0 deg\namplitude pp = 1.2 um"
+    fig = Figure(figsize=(9.4, 8), layout="constrained")
+    axes = fig.subplots(3, 4)
+    assert plots._wrap(title, axes[0, 1]) == title
+    narrow = Figure(figsize=(4.0, 4), layout="constrained").subplots(1, 4)[0]
+    lines = plots._wrap(title, narrow).split("\n")
+    assert len(lines) > 2 and " ".join(lines) == title.replace("\n", " ")
+    for unit in ("deg", "um"):
+        assert not any(line == unit or line.startswith(unit + " ") for line in lines), lines
+        assert any(line.endswith(("= 0 " + unit, "= 1.2 " + unit)) for line in lines), lines
+    third = Figure(figsize=(6.0, 4), layout="constrained").subplots(1, 3)[0]  # ~21 characters a line
+    assert plots._wrap("E_skin_micro: contraction 1.00", third) == "E_skin_micro:\ncontraction 1.00"
