@@ -726,12 +726,11 @@ def _wrap(text, ax, fontsize=MIN_FONT + 1):
     parted from the words on either side ("= 0 deg", "contraction 1.00")."""
     import textwrap
 
-    fig = ax.figure
-    width_in = ax.get_position().width * fig.get_figwidth()
-    spec = ax.get_subplotspec()
+    fig, spec = ax.figure, ax.get_subplotspec()
     if spec is not None and isinstance(fig.get_layout_engine(), matplotlib.layout_engine.ConstrainedLayoutEngine):
-        share = (spec.colspan.stop - spec.colspan.start) / spec.get_gridspec().ncols
-        width_in = max(width_in, (fig.get_figwidth() - 0.8) * share - 0.1)
+        width_in = (fig.get_figwidth() - 0.8) * len(spec.colspan) / spec.get_gridspec().ncols - 0.1
+    else:
+        width_in = ax.get_position().width * fig.get_figwidth()
     per_line = max(12, int(width_in * 72 / (0.6 * fontsize)))
     bound = re.sub(r"(?<=\S) (?=[-+]?\.?\d)|(?<=\d) (?=\S)", "\u00a0", text)  # a number stays with its neighbours
     return "\n".join(w for line in bound.split("\n") for w in textwrap.wrap(line, per_line)).replace("\u00a0", " ")

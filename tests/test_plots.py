@@ -544,6 +544,11 @@ def test_panel_titles_wrap_to_the_laid_out_width_and_keep_numbers_with_their_uni
     fig = Figure(figsize=(9.4, 8), layout="constrained")
     axes = fig.subplots(3, 4)
     assert plots._wrap(title, axes[0, 1]) == title
+    long = "direction angle = 0 deg, amplitude pp = 1.2 um, velocity = 40 mm/s, normal force = 0.5 N"
+    for ax in axes.flat:  # laid out and measured by matplotlib: the wrapped titles do not collide
+        ax.set_title(plots._wrap(long, ax), fontsize=plots.MIN_FONT + 1)
+    fig.draw_without_rendering()
+    assert not layout_problems(fig)
     narrow = Figure(figsize=(4.0, 4), layout="constrained").subplots(1, 4)[0]
     lines = plots._wrap(title, narrow).split("\n")
     assert len(lines) > 2 and " ".join(lines) == title.replace("\n", " ")
