@@ -296,7 +296,9 @@ def build_parser():
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_lazy("skinfit.compare", "cli_compare"))
     s = sub.add_parser("report", help="write a self-contained static HTML report of fits")
-    s.add_argument("runs", nargs="+", help="run directories or fit.nc files, and folders written by `skinfit design --out` (a section each)")
+    s.add_argument("runs", nargs="+", help="run directories or fit.nc files, and folders written by `skinfit design --out` "
+                   "(a section each); a run's population saved by `skinfit population RUN` is shown when made from "
+                   "the same fits (else one is computed with the defaults, and the report says so)")
     s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
     s.add_argument("--json", action="store_true", help="print the report's path and fits as JSON")
     s.set_defaults(func=_lazy("skinfit.report", "cli_report"))

@@ -55,7 +55,7 @@ from .figure_store import storable
 from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator
 from .hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 
-__all__ = ["population", "PopulationResult", "PopulationWarning", "population_tables", "load_population",
+__all__ = ["population", "PopulationResult", "PopulationWarning", "population_tables", "load_population", "subject_digest",
            "load_run", "DrawsFit", "FAMILIES"]
 
 FAMILIES = ("normal", "lognormal", "student_t")
@@ -178,6 +178,25 @@ def _as_fits(fits, model=None):
     return {str(k): v for k, v in fits.items()}
 
 
+def subject_digest(fit):
+    """sha256 of what a population reads of one subject's fit: its model, prior file and data
+    (ids and the sha256 the fit records of them) and its posterior draws. The same for the fit
+    in memory, loaded whole or loaded light (:func:`load_run`), and unchanged by what a
+    comparison or a report adds to the file (evidence, LOO, summary)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    attrs = fit.attrs
+    h.update(json.dumps([str(attrs.get(k)) for k in ("model_id", "model_sha256", "priors_id", "priors_sha256",
+                                                     "dataset_id", "dataset_sha256")]).encode())
+    post = fit.group("posterior")
+    for name in sorted(post.data_vars):
+        values = np.ascontiguousarray(np.asarray(post[name].values, dtype=float))
+        h.update(f"{name}{tuple(post[name].dims)}{values.shape}".encode())
+        h.update(values.tobytes())
+    return h.hexdigest()
+
+
 def _prior_moments(prior, log):
     """Mean and sd of a prior in the population coordinate (2000 quantiles)."""
     q = prior.ppf((np.arange(2000) + 0.5) / 2000)
@@ -246,6 +265,11 @@ class PopulationResult:
     sampler: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     contraction: dict = field(default_factory=dict)
+    #: {subject label: :func:`subject_digest` of its fit}: which fits the result was made from
+    #: (empty for subjects given as draws), so that a saved result is matched to fits by content.
+    inputs: dict = field(default_factory=dict)
+    #: The file the result was read from (:func:`load_population`); empty when computed here.
+    origin: str = ""
 
     @property
     def log(self):
@@ -441,7 +465,8 @@ class PopulationResult:
                  "families": json.dumps(dict(zip(self.parameters, self.families))),
                  "coordinates": json.dumps(dict(zip(self.parameters, self.coordinates))),
                  "hyperpriors": json.dumps(self.hyperpriors), "sampler": json.dumps(self.sampler, default=float),
-                 "warnings": json.dumps(self.warnings), "contraction": json.dumps(self.contraction)}
+                 "warnings": json.dumps(self.warnings), "contraction": json.dumps(self.contraction),
+                 "inputs": json.dumps(self.inputs)}
         tree = az.from_dict({"posterior": post}, dims=dims, coords=coords, attrs={"/": attrs})
         import xarray as xr
 
@@ -471,7 +496,8 @@ def _diag(name, qty, x, az):
 
 def load_population(path):
     """A :class:`PopulationResult` from the NetCDF written by :meth:`PopulationResult.save`
-    (the separate fits' draws thinned to at most 1000 a subject)."""
+    (the separate fits' draws thinned to at most 1000 a subject), with ``origin`` the path;
+    ``inputs`` is empty for a file written before skinfit recorded them."""
     import arviz as az
 
     tree = az.from_netcdf(path)
@@ -488,7 +514,7 @@ def load_population(path):
                             post["sd"].values, post["corr"].values if "corr" in post else None,
                             tree["subjects"].to_dataset()["theta"].values, sep, json.loads(attrs["hyperpriors"]),
                             json.loads(attrs["sampler"]), json.loads(attrs["warnings"]),
-                            json.loads(attrs["contraction"]))
+                            json.loads(attrs["contraction"]), json.loads(attrs.get("inputs", "{}")), str(path))
 
 
 def population_tables(result, prob=0.95):
@@ -525,6 +551,7 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         ``reweight``: emcee over the hyper-posterior estimated from ``n_draws`` draws per
         subject (the earlier method; adequate for one or two parameters).
     rng : int, None or numpy.random.Generator
+        The seed, recorded in ``sampler["seed"]`` (drawn and recorded when None).
     chains, ess_target, rhat_max, max_sweeps, burn : Gibbs chains, the stopping rule (bulk and
         tail ESS >= ess_target and R-hat <= rhat_max for every hyper-parameter), sweep cap and
         burn-in.
@@ -543,6 +570,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     -------
     PopulationResult
     """
+    if rng is None:  # a seed drawn here, recorded in the result's sampler record like a given one
+        rng = int(np.random.SeedSequence().entropy)
     seed, rng = rng, as_generator(rng)
     fits = _as_fits(fits, model)
     key = None
@@ -629,11 +658,13 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     else:
         mu, sd, corr, shrunk, sampler = _reweight(fits, subjects, parameters, slots, priors, logs, centre, scale,
                                                   correlated, rng, n_draws, ess_target, max_steps, warn)
+    inputs = {s: subject_digest(fits[s]) for s in subjects} if all(isinstance(f, Fit) for f in fits.values()) else {}
     result = PopulationResult(first.model_id, parameters, fams, subjects, mu, sd, corr, shrunk, separate, hyper,
-                              sampler, warn, contraction)
+                              sampler, warn, contraction, inputs)
     diag = result.diagnostics()
     worst_rhat, worst_ess = diag["r_hat"].max(), diag[["ess_bulk", "ess_tail"]].min().min()
-    result.sampler.update(rhat_max=float(worst_rhat), ess_min=float(worst_ess))
+    result.sampler.update(rhat_max=float(worst_rhat), ess_min=float(worst_ess),
+                          seed=int(seed) if isinstance(seed, (int, np.integer)) else "a numpy Generator given")
     if not result.converged or (np.isfinite(worst_rhat) and worst_rhat > rhat_max) or worst_ess < ess_target:
         warn.append(f"hyper-posterior not converged: max R-hat {worst_rhat:.3f}, min ESS {worst_ess:.0f} "
                     f"(targets {rhat_max:g}, {ess_target:g}); rerun with a larger max_sweeps")
@@ -670,7 +701,8 @@ def _write_cache(path, key, result):
 
     meta = {"key": key, "model_id": result.model_id, "parameters": result.parameters, "families": result.families,
             "subjects": result.subjects, "hyperpriors": result.hyperpriors, "sampler": result.sampler,
-            "warnings": result.warnings, "contraction": result.contraction, "corr": result.corr is not None}
+            "warnings": result.warnings, "contraction": result.contraction, "corr": result.corr is not None,
+            "inputs": result.inputs}
     arrays = {"mu": result.mu, "sd": result.sd, "shrunk": result.shrunk,
               **({"corr": result.corr} if result.corr is not None else {}),
               **{f"separate_{i}": result.separate[s] for i, s in enumerate(result.subjects)}}
@@ -695,7 +727,7 @@ def _read_cache(path, key):
             return PopulationResult(meta["model_id"], meta["parameters"], meta["families"], meta["subjects"],
                                     z["mu"], z["sd"], z["corr"] if meta["corr"] else None, z["shrunk"],
                                     {s: z[f"separate_{i}"] for i, s in enumerate(meta["subjects"])}, hyper,
-                                    meta["sampler"], meta["warnings"], meta["contraction"])
+                                    meta["sampler"], meta["warnings"], meta["contraction"], meta["inputs"])
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         return None
 
@@ -860,7 +892,8 @@ def cli_population(args):
     tables["subjects"].to_csv(out / "population_subjects.csv", index=False)
     tables["effects"].to_csv(out / "population_effects.csv", index=False)
     s = result.sampler
-    lines = [f"population of {len(result.subjects)} subjects ({result.model_id}), method {s['method']}",
+    lines = [f"population of {len(result.subjects)} subjects ({result.model_id}), method {s['method']}, "
+             f"seed {s.get('seed')}",
              "families: " + ", ".join(f"{p} {f}" + ("" if (args.family and (p in _parse_family(args.family)))
                                                     else " (default)") for p, f in zip(result.parameters, result.families)),
              "hyper-priors (from the prior file): " + "; ".join(f"{p}: mu ~ {h['mu']}, sd ~ {h['sd']}"

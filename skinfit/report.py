@@ -746,12 +746,12 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
                           "csv": f"population_{safe}.csv",
                           "subjects": [{"parameter": k, "table": _table(v, "subject")}
                                        for k, v in pop_info["subjects"].items()],
-                          "hyperpriors": {k: str(v) for k, v in pop_info["hyperpriors"].items()},
+                          "hyperpriors": _table(pop_info["hyperprior_table"], "parameter"),
                           "effects": None if pop_info["effects"] is None else
                           _table(pop_info["effects"].set_index(pop_info["effects"].columns[0]),
                                  pop_info["effects"].columns[0]),
-                          "warnings": pop_info["warnings"],
-                          "sampler": {k: str(v) for k, v in pop_info["sampler"].items() if k != "tau"}}
+                          "warnings": pop_info["warnings"], "origin": pop_info["origin"],
+                          "correlation": pop_info["correlation"], "sampler": pop_info["sampler_text"]}
         else:
             pop_tables = None
         figures = []
@@ -826,6 +826,22 @@ def _collect_runs(paths):
     return out
 
 
+def _saved_populations(paths):
+    """The populations ``skinfit population RUN`` saved beside the runs given (RUN/population/
+    population.nc), read; one that cannot be read is named on stderr and left out."""
+    out = []
+    for p in dict.fromkeys(Path(p) / "population" / "population.nc" for p in paths):
+        if p.is_file():
+            from .population import load_population  # only then: it imports scipy.stats
+
+            try:
+                out.append(load_population(p))
+            except Exception as exc:  # noqa: BLE001 - a damaged file is reported; the report computes its own
+                print(f"skinfit report: warning: {p} could not be read ({type(exc).__name__}: {exc}): not used",
+                      file=sys.stderr)
+    return out
+
+
 def _comparisons(fits):
     """Evidence/LOO tables for fits of different models on the same data, if skinfit.compare exists."""
     groups = {}
@@ -878,7 +894,7 @@ def cli_report(args):
     items = _as_fits(fits)
     comparison = _comparisons(items)
     populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
-                                            cache_dir=Path(args.out) / ".cache")
+                                            cache_dir=Path(args.out) / ".cache", saved=_saved_populations(args.runs))
     index = write_report(dict(items), args.out, comparison=comparison, populations=populations,
                          contrasts=contrasts, designs=designs)
     if getattr(args, "json", False):

@@ -9,13 +9,14 @@ Each section returns plain dicts of tables and figure jobs for :mod:`skinfit.rep
 """
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 __all__ = ["subject_label", "PopulationView", "subjects_section", "population_section", "contrast_section",
-           "population_parameters", "group_analyses"]
+           "population_parameters", "group_analyses", "hyperprior_table", "sampler_text"]
 
 
 def subject_label(fit):
@@ -29,11 +30,12 @@ def subject_label(fit):
     return ", ".join(parts)
 
 
-def population_parameters(fit, limit=4):
-    """Default parameters of a population: the scalar (not split) physical parameters, noise
-    scales left out, in the model card's order, at most ``limit``."""
+def population_parameters(fit):
+    """Default parameters of a report's population: the scalar (not split) physical parameters,
+    noise scales left out, in the model card's order (those of ``skinfit population``'s
+    default but for the split parameters' levels)."""
     names = [s["name"] for s in fit.attr("slots") if s["level"] is None]
-    return [n for n in names if not re.match(r"^(sigma|nu)(_|$)", n)][:limit]
+    return [n for n in names if not re.match(r"^(sigma|nu)(_|$)", n)]
 
 
 class PopulationView:
@@ -134,9 +136,79 @@ def population_section(result):
         t = per[per["parameter"] == name].drop(columns="parameter").set_index("subject")
         subjects[name] = t
     return {"parameters": view.parameters, "hyper": hyper, "subjects": subjects,
-            "hyperpriors": view.hyperpriors(), "sampler": view.sampler(), "effects": view.effects(),
-            "warnings": view.warnings(),
+            "hyperpriors": view.hyperpriors(), "hyperprior_table": hyperprior_table(view.hyperpriors()),
+            "sampler": view.sampler(), "sampler_text": sampler_text(view.sampler()), "effects": view.effects(),
+            "warnings": view.warnings(), "origin": getattr(view.result, "origin", "") or "",
+            "correlation": dict(getattr(view.result, "hyperpriors", {}) or {}).get("_correlation"),
             "intervals": {p: view.population_interval(p) for p in view.parameters}}
+
+
+def hyperprior_table(hyperpriors):
+    """The hyper-priors as a table, a row per parameter: family, coordinate, the priors of the
+    population location ``mu`` and scale ``tau`` (``sd``), and the prior file's prior they were
+    derived from; other entries (``nu`` of a Student-t family) as further columns."""
+    named = {"family": "family", "coordinate": "coordinate", "mu": "prior of mu", "sd": "prior of tau",
+             "from": "derived from"}
+    entries = {name: h for name, h in hyperpriors.items() if isinstance(h, dict)}
+    extra = list(dict.fromkeys(k for h in entries.values() for k in h if k not in named))  # nu: Student-t only
+    frame = pd.DataFrame([{**{shown: h.get(key, "") for key, shown in named.items()},
+                           **{k: h.get(k, "") for k in extra}} for h in entries.values()],
+                         index=pd.Index(list(entries), name="parameter"))
+    return frame
+
+
+def _range(values):
+    values = [float(v) for v in values]
+    lo, hi = min(values), max(values)
+    return f"{lo:.2f}" if round(lo, 2) == round(hi, 2) else f"{lo:.2f}-{hi:.2f}"
+
+
+def sampler_text(sampler):
+    """One sentence on how a population was sampled, from its sampler record: method, chains,
+    sweeps, burn-in and thinning (Gibbs) or steps (reweighting), convergence with the worst
+    R-hat and ESS, and per-subject rates as their range; the record's convergence history
+    (``checks``) is left to the saved result."""
+    if not sampler:
+        return ""
+    parts = [str(sampler.get("method", "sampler not recorded"))]
+    if "chains" in sampler:
+        parts.append(f"{sampler['chains']} chains")
+    if "sweeps" in sampler:
+        parts.append(f"{sampler['sweeps']} sweeps (burn-in {sampler.get('burn', '?')}, thinned by "
+                     f"{sampler.get('thin', '?')})")
+    if "n_steps" in sampler:
+        parts.append(f"{sampler['n_steps']} steps")
+    if "draws_per_subject" in sampler:
+        parts.append(f"{sampler['draws_per_subject']} draws a subject")
+    text = ", ".join(parts)
+    if "converged" in sampler:
+        text += "; " + ("converged" if sampler["converged"] else "NOT converged")
+    worst = [f"max R-hat {float(sampler['rhat_max']):.4f}" if "rhat_max" in sampler else "",
+             f"min ESS {float(sampler['ess_min']):.0f}" if "ess_min" in sampler else ""]
+    if any(worst):
+        text += f" ({', '.join(w for w in worst if w)})"
+    rates = []
+    if isinstance(sampler.get("acceptance"), dict) and sampler["acceptance"]:
+        rates.append(f"acceptance per subject {_range(sampler['acceptance'].values())}")
+    if isinstance(sampler.get("scale_acceptance"), (int, float)):  # None: no scale moves (correlated)
+        rates.append(f"of the scale moves {float(sampler['scale_acceptance']):.2f}")
+    if isinstance(sampler.get("importance_ess"), dict) and sampler["importance_ess"]:
+        rates.append(f"importance ESS per subject {_range(sampler['importance_ess'].values())}")
+    if rates:
+        text += "; " + ", ".join(rates)
+    if "seed" in sampler:
+        text += f"; seed {sampler['seed']}"
+    return text + "."
+
+
+def _other_fits(result, digests, base):
+    """Why the saved population ``result`` is not the one shown for the fits of ``digests``."""
+    theirs = set(result.inputs.values())
+    why = (f"{len(theirs)} subjects' fits, {len(theirs & set(digests))} of them among the {len(digests)} here"
+           if theirs else "it does not record its fits: written by an older skinfit")
+    return (f"the population saved in {result.origin or 'a result given'} is not shown: it was made from other "
+            f"{result.model_id} fits than those on {base} reported here ({why}); the one shown was computed for "
+            f"this report with the defaults (run `skinfit population` again to show yours)")
 
 
 def contrast_section(table, top=None):
@@ -152,17 +224,25 @@ def contrast_section(table, top=None):
     return t.head(top) if top else t
 
 
-def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None):
+def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved=()):
     """Population results and contrasts for the fits of a ``--by`` run or a campaign.
 
-    ``fits``: {key: Fit}. For each model with at least ``min_fits`` fits on groups of one
-    dataset (dataset ids ``NAME[col=value]``): the population of
-    :func:`population_parameters` (:func:`skinfit.population.population`, seeded) and the
-    pairwise contrasts between subjects of those parameters; for every fit with a parameter
-    split by a condition, the contrasts between its levels. A failing step is reported
-    through ``echo`` and left out, never a partial table.
+    ``fits``: {key: Fit}. For each model with at least ``min_fits`` fits on groups of datasets
+    (dataset ids ``NAME[col=value]``; subjects of several datasets pooled, labelled
+    ``NAME/subject`` as ``skinfit population`` labels a campaign's): a population and the
+    pairwise contrasts between subjects of its parameters (none when a subject is fitted twice,
+    which is said through ``echo``); for every fit with a parameter split by a condition, the
+    contrasts between its levels. A failing step is reported through ``echo`` and left out,
+    never a partial table.
 
-    ``cache_dir``: where each population is kept by the content of its inputs
+    The population is the one of ``saved`` (results of ``skinfit population``, e.g. read by
+    :func:`skinfit.population.load_population`) made from exactly these fits, matched by
+    content (:func:`skinfit.population.subject_digest` of every subject; labels may differ);
+    else it is computed here over :func:`population_parameters` with the default families,
+    seeded, and a saved result of the model made from other fits is named in its warnings
+    (and through ``echo``), not shown.
+
+    ``cache_dir``: where each computed population is kept by the content of its inputs
     (:func:`skinfit.population.population`'s ``cache``), so a report of the same fits does
     not sample it again.
 
@@ -178,23 +258,49 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None):
     for key, f in fits.items():
         base = re.sub(r"\[.*\]$", "", f.dataset_id)
         if base != f.dataset_id:
-            by_model.setdefault((f.model_id, base), {})[subject_label(f)] = f
+            by_model.setdefault(f.model_id, []).append((base, key, f))
     populations, contrasts = {}, {}
-    for (model_id, base), group in by_model.items():
+    for model_id, members in by_model.items():
+        bases = sorted({b for b, _, _ in members})
+        base = ", ".join(bases)  # subjects of several datasets: one population, labelled dataset/subject
+        group, keys, twice = {}, {}, []
+        for b, key, f in members:
+            label = subject_label(f) if len(bases) == 1 else f"{b}/{subject_label(f)}"
+            if label in group:
+                twice.append(f"{label} (report keys {keys[label]} and {key})")
+            group[label], keys[label] = f, key
+        if twice:  # the same subject counted twice would be two subjects to the population
+            if echo:
+                echo(f"skinfit report: no population or contrasts between subjects for {model_id}: fitted more "
+                     f"than once: {'; '.join(twice)}")
+            continue
         if len(group) < min_fits:
             continue
-        names = population_parameters(next(iter(group.values())))
-        try:
-            from .population import population
+        from .population import subject_digest
 
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                stem = file_part(f"{model_id}__{base}")
-                cache = None if cache_dir is None else Path(cache_dir) / f"population_{stem}.npz"
-                populations[model_id] = population(group, names, rng=seed, cache=cache)
-        except (InputError, ValueError, RuntimeError) as exc:
-            if echo:
-                echo(f"skinfit report: no population for {model_id} on {base}: {exc}")
+        digests = sorted(subject_digest(f) for f in group.values())
+        mine = [r for r in saved if r.model_id == model_id]
+        match = next((r for r in mine if sorted(r.inputs.values()) == digests), None)
+        names = population_parameters(next(iter(group.values())))
+        if match is not None:
+            populations[model_id] = match
+        else:
+            try:
+                from .population import population
+
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    stem = file_part(f"{model_id}__{'__'.join(bases)}")
+                    cache = None if cache_dir is None else Path(cache_dir) / f"population_{stem}.npz"
+                    result = population(group, names, rng=seed, cache=cache)
+                notes = [_other_fits(r, digests, base) for r in mine]
+                for note in notes:
+                    if echo:
+                        echo(f"skinfit report: {note}")
+                populations[model_id] = replace(result, warnings=[*result.warnings, *notes]) if notes else result
+            except (InputError, ValueError, RuntimeError) as exc:
+                if echo:
+                    echo(f"skinfit report: no population for {model_id} on {base}: {exc}")
         rows = []
         for name in names:
             try:

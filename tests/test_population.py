@@ -255,8 +255,8 @@ def test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs(thi
         assert a.separate.keys() == b.separate.keys()
         for s in a.separate:
             np.testing.assert_array_equal(a.separate[s], b.separate[s])
-        assert (a.parameters, a.families, a.subjects, a.warnings, a.contraction, a.hyperpriors) == \
-            (b.parameters, b.families, b.subjects, b.warnings, b.contraction, b.hyperpriors)
+        assert (a.parameters, a.families, a.subjects, a.warnings, a.contraction, a.hyperpriors, a.inputs) == \
+            (b.parameters, b.families, b.subjects, b.warnings, b.contraction, b.hyperpriors, b.inputs)
         for table in ("summary", "subject_summary", "effects"):
             pd.testing.assert_frame_equal(getattr(a, table)(), getattr(b, table)(), check_exact=True)
 
@@ -288,6 +288,41 @@ def test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs(thi
     foreign, kept = {**small, label: skinfit.Fit(tree)}, tmp_path / "foreign.npz"
     _quiet(foreign, "mu", cache=kept, **options)
     assert not kept.exists()
+
+
+def test_a_population_records_its_fits_by_content_and_its_seed(thirteen, cli_result):
+    """The saved result names each subject's fit by :func:`subject_digest`: the same for the
+    fit loaded whole or light, unchanged by an evidence a comparison caches in the file,
+    changed by any posterior draw. A population run without a seed records the one drawn,
+    which reproduces it."""
+    import xarray as xr
+
+    from skinfit.fit import load_fit
+    from skinfit.population import subject_digest
+
+    run, fits, _ = thirteen
+    back = cli_result[2]
+    assert back.sampler["seed"] == 1
+    index = json.loads((run / "index.json").read_text())
+    whole = {g["group"].split("=")[1]: load_fit(run / g["path"]) for g in index["groups"]}
+    assert back.inputs == {s: subject_digest(f) for s, f in whole.items()} == \
+        {s: subject_digest(f) for s, f in fits.items()}
+    fit = whole["S01"]
+    tree = fit.partial_tree.copy()
+    tree.attrs["evidence"] = json.dumps({"log_z": -12.0})
+    assert subject_digest(skinfit.Fit(tree)) == back.inputs["S01"]
+    ds = fit.group("posterior").copy()
+    ds["mu"] = ds["mu"].copy(data=ds["mu"].values.copy())
+    ds["mu"].values[0, 0] *= 1.000001
+    tree["posterior"] = xr.DataTree(ds)
+    assert subject_digest(skinfit.Fit(tree)) != back.inputs["S01"]
+
+    small = dict(list(fits.items())[:3])
+    drawn = _quiet(small, "mu", ess_target=50, rhat_max=1.1)
+    seed = drawn.sampler["seed"]
+    assert isinstance(seed, int) and seed > 2**32  # drawn from fresh entropy, not a fixed default
+    again = _quiet(small, "mu", rng=seed, ess_target=50, rhat_max=1.1)
+    np.testing.assert_array_equal(again.mu, drawn.mu)
 
 
 def test_correlated_population_gives_valid_correlations(thirteen):

@@ -2,6 +2,8 @@
 shrunk beside separate estimates, contrasts with their probability of direction, conditions
 named in parameter rows, and a word when evidence and LOO disagree."""
 
+import json
+import re
 import warnings
 
 import numpy as np
@@ -91,3 +93,135 @@ def test_population_band_is_where_94_percent_of_subjects_lie():
     lo, hi = stats.lognorm(0.5, scale=2e4).ppf([0.03, 0.97])
     assert band["median"] == pytest.approx(2e4)
     assert band["lo"] == pytest.approx(lo, rel=1e-3) and band["hi"] == pytest.approx(hi, rel=1e-3)
+
+
+def _by_run(fits, folder):
+    """``fits`` {subject: Fit} saved as a ``skinfit fit --by subject`` run directory."""
+    folder.mkdir(parents=True)
+    groups = []
+    for s, f in fits.items():
+        f.save(folder / s / "fit.nc")
+        groups.append({"group": f"subject={s}", "path": f"{s}/fit.nc"})
+    (folder / "index.json").write_text(json.dumps({"model": "contact_area", "dataset": "contact_area_synthetic",
+                                                   "by": ["subject"], "groups": groups}))
+    return folder
+
+
+def _population_note(index):
+    html = index.read_text()
+    start = html.index('data-note="population-origin">') + len('data-note="population-origin">')
+    return re.sub(r"<[^>]+>", "", html[start:html.index("</p>", start)]), html
+
+
+def test_report_of_a_run_shows_the_population_saved_for_its_fits_and_never_another(subject_fits, tmp_path,
+                                                                                    monkeypatch, capsys):
+    """`skinfit population RUN` (the user's choices: two parameters, correlated) then `skinfit
+    report RUN`: the report shows that population, saying where it is from; once a subject is
+    fitted again, the saved one is named as made from other fits and not shown."""
+    from skinfit.cli import main
+    from skinfit.population import load_population
+
+    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
+    run = _by_run(subject_fits, tmp_path / "run")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["population", str(run), "--params", "m0,n_z0", "--correlated", "--seed", "3"]) == 0
+        assert main(["report", str(run), "--out", str(tmp_path / "r1")]) == 0
+    saved = load_population(run / "population" / "population.nc")
+    assert saved.parameters == ["m0", "n_z0"] and saved.corr is not None and saved.sampler["seed"] == 3
+    shown = pd.read_csv(tmp_path / "r1" / "population_contact_area.csv")
+    assert sorted(set(shown["parameter"])) == ["m0", "m0,n_z0", "n_z0"]  # the user's two, and their correlation
+    np.testing.assert_allclose(shown["estimate"], saved.summary()["estimate"])
+    note, html = _population_note(tmp_path / "r1" / "index.html")
+    assert f"From {run / 'population' / 'population.nc'}" in note and "Correlated population" in note
+    assert "seed 3" in note and "{'" not in html  # the sampler record read as a sentence, not a dict
+    assert 'data-table="hyperpriors"' in html and "half-t(nu=2" in html
+
+    # S02 fitted again (another seed): the saved population is of other fits
+    again = skinfit.fit("contact_area", subject_fits["S02"].posterior.dataset, rng=99, max_steps=600,
+                        ess_target=100, n_global=300)
+    again.save(run / "S02" / "fit.nc")
+    capsys.readouterr()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["report", str(run), "--out", str(tmp_path / "r2")]) == 0
+    err = capsys.readouterr().err
+    assert f"the population saved in {run / 'population' / 'population.nc'} is not shown" in err
+    assert "3 subjects' fits, 2 of them among the 3 here" in err
+    note, html = _population_note(tmp_path / "r2" / "index.html")
+    assert note.startswith("Computed for this report") and "is not shown: it was made from other" in html
+    shown = pd.read_csv(tmp_path / "r2" / "population_contact_area.csv")
+    assert sorted(set(shown["parameter"])) == sorted(["alpha_a0", "alpha_a1", "m0", "m1", "beta_z0", "beta_z1",
+                                                      "n_z0", "n_z1"])
+
+
+def test_a_report_population_has_every_parameter_but_the_noise_scales(subject_fits):
+    """contact_area (Huloux, Willemet & Wiertlewski): alpha_a, m, beta_z, n_z, each with a slope
+    in the actuation force, and two noise scales that stay per subject."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        populations, _ = group_analyses(dict(subject_fits))
+    assert populations["contact_area"].parameters == ["alpha_a0", "alpha_a1", "m0", "m1", "beta_z0", "beta_z1",
+                                                      "n_z0", "n_z1"]
+
+
+def test_the_population_sampler_and_hyper_priors_read_as_text_and_a_table():
+    from skinfit.report_groups import hyperprior_table, sampler_text
+
+    gibbs = {"method": "gibbs (Metropolis-within-Gibbs)", "chains": 8, "sweeps": 2442, "burn": 300, "thin": 3,
+             "converged": True, "checks": [{"sweeps": 400, "ess_bulk": 66.4}], "acceptance": {"a": 0.613, "b": 0.587},
+             "scale_acceptance": 0.1993, "rhat_max": 1.009539, "ess_min": 511.9, "seed": 7}
+    assert sampler_text(gibbs) == ("gibbs (Metropolis-within-Gibbs), 8 chains, 2442 sweeps (burn-in 300, thinned by "
+                                   "3); converged (max R-hat 1.0095, min ESS 512); acceptance per subject 0.59-0.61, "
+                                   "of the scale moves 0.20; seed 7.")
+    reweight = {"method": "reweight", "converged": False, "n_steps": 900, "draws_per_subject": 500,
+                "importance_ess": {"a": 120.0, "b": 80.4}}
+    assert sampler_text(reweight) == ("reweight, 900 steps, 500 draws a subject; NOT converged; importance ESS per "
+                                      "subject 80.40-120.00.")
+    table = hyperprior_table({"E": {"family": "student_t", "coordinate": "log", "mu": "normal(loc=1, scale=2)",
+                                    "sd": "half-t(nu=2, scale=1)", "from": "prior file x: ...", "nu": 4},
+                              "m": {"family": "normal", "coordinate": "natural", "mu": "normal(loc=0, scale=1)",
+                                    "sd": "half-t(nu=2, scale=0.5)", "from": "prior file x: ..."}})
+    assert list(table.columns) == ["family", "coordinate", "prior of mu", "prior of tau", "derived from", "nu"]
+    assert table.loc["m", "nu"] == "" and table.loc["E", "prior of tau"] == "half-t(nu=2, scale=1)"
+
+
+def test_a_saved_population_that_does_not_record_its_fits_is_named_not_shown(subject_fits):
+    from dataclasses import replace
+
+    from skinfit.population import population
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mine = population(subject_fits, ["m0"], rng=1)
+        assert len(mine.inputs) == 3
+        populations, _ = group_analyses(dict(subject_fits), saved=[replace(mine, origin="mine.nc")])
+        assert populations["contact_area"] is not None and populations["contact_area"].parameters == ["m0"]
+        older = replace(mine, inputs={}, origin="old/population.nc")
+        populations, _ = group_analyses(dict(subject_fits), saved=[older])
+    shown = populations["contact_area"]
+    assert len(shown.parameters) == 8 and shown.origin == ""
+    assert any("old/population.nc is not shown" in w and "written by an older skinfit" in w for w in shown.warnings)
+
+
+def test_subjects_of_two_datasets_make_one_population_and_a_subject_twice_none(subject_fits):
+    """A model's subjects on two datasets are pooled, labelled dataset/subject (as `skinfit
+    population` labels a campaign's), never one dataset's population shown for both; the
+    same subject passed twice would count as two subjects: no population, and it is said."""
+    def relabelled(f, dataset_id):
+        tree = f.partial_tree.copy()
+        tree.attrs["dataset_id"] = dataset_id
+        return skinfit.Fit(tree)
+
+    two = dict(subject_fits) | {f"lab2-{s}": relabelled(f, f"lab2[subject={s}]") for s, f in subject_fits.items()}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        populations, contrasts = group_analyses(two)
+        assert populations["contact_area"].subjects == [*(f"contact_area_synthetic/{s}" for s in SUBJECTS),
+                                                        *(f"lab2/{s}" for s in SUBJECTS)]
+        assert "contact_area on contact_area_synthetic, lab2: between subjects" in contrasts
+        said = []
+        populations, contrasts = group_analyses(dict(subject_fits) | {"again": subject_fits["S01"]}, echo=said.append)
+    assert populations == {} and not any("between subjects" in k for k in contrasts)
+    assert said == ["skinfit report: no population or contrasts between subjects for contact_area: fitted more than "
+                    "once: S01 (report keys S01 and again)"]
