@@ -544,7 +544,8 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     ----------
     fits : Fit, or a list of fits (DataTrees or paths accepted), or a dict name -> fit
     out_dir : path
-        Created if needed; holds index.html, summary.md, the CSV tables and figures/.
+        Created if needed; holds index.html, summary.md, the CSV tables and figures/. A folder
+        holding other files than an earlier report's is refused (:class:`InputError`).
     title : str, optional
     comparison : pandas.DataFrame or dict name -> DataFrame, optional
         A model-comparison table (e.g. :func:`skinfit.compare`): shown as a table and a chart,
@@ -571,10 +572,11 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
 
     out = Path(out_dir)
     figdir = out / "figures"
-    figdir.mkdir(parents=True, exist_ok=True)
     items = _as_fits(fits)
     if not items:
         raise InputError("skinfit report", "no fits given")
+    _claim_folder(out)
+    figdir.mkdir(parents=True, exist_ok=True)
     issues_all, sections, jobs = [], [], []
     per_model = {}
     for _, fit in items:
@@ -668,6 +670,32 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     index.write_text(env.get_template("report.html.j2").render(**context), encoding="utf-8")
     (out / "summary.md").write_text(_summary_md(context), encoding="utf-8")
     return index
+
+
+#: A file in each report folder: the folder is the report's, to rewrite on the next report into it.
+REPORT_MARKER = ".skinfit-report"
+
+
+def _claim_folder(out):
+    """Make ``out`` a report folder: a new or empty one, or one a report wrote (it holds
+    :data:`REPORT_MARKER`, or the index.html of a report written before the marker). A folder
+    of other files is refused before anything is written, so that a careless ``--out .`` never
+    overwrites the user's own index.html, summary.md or CSV tables."""
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "is a file: --out names the folder the report is written into")
+    if out.is_dir() and not (out / REPORT_MARKER).exists() and any(out.iterdir()):
+        index = out / "index.html"
+        try:
+            with open(index, "rb") as f:
+                ours = b'<meta name="generator" content="skinfit ' in f.read(4096)
+        except OSError:
+            ours = False
+        if not ours:
+            raise InputError(out, "holds files a skinfit report did not write: give a new or empty folder, e.g. "
+                                  f"{out / 'report'} (nothing was written)")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / REPORT_MARKER).write_text("This folder was written by `skinfit report`; the next report into it "
+                                     "rewrites its files.\n", encoding="utf-8")
 
 
 def _break_at_underscores(value):
@@ -892,6 +920,8 @@ def cli_report(args):
     for message in data_drift(list(zip(runs, fits))):  # never a stale result unannounced
         print(f"skinfit report: warning: {message}", file=sys.stderr)
     items = _as_fits(fits)
+    if items:  # refused before the population's cache is written into it
+        _claim_folder(Path(args.out))
     comparison = _comparisons(items)
     populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
                                             cache_dir=Path(args.out) / ".cache", saved=_saved_populations(args.runs))

@@ -384,3 +384,33 @@ def test_table_names_break_at_their_underscores_and_stay_escaped(written):
     assert ">log_<wbr>z_<wbr>se</th>" in html
     assert "electroadhesion_coulomb" in _frame(_parse(index).tables[("comparison", "comparison.csv")]).index
     assert str(report._break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
+
+
+def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path, monkeypatch, capsys):
+    """`--out` naming a folder of the user's own files (index.html, summary.md, a CSV): refused
+    with one line naming it, and not a byte changed or added; a folder an earlier report wrote
+    (its marker, or a skinfit index.html from before the marker) is written again."""
+    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
+    run = tmp_path / "run"
+    ea_fit.save(run / "fit.nc")
+    mine = tmp_path / "site"
+    mine.mkdir()
+    files = {"index.html": b"<html>my lab page</html>", "summary.md": b"my notes", "data_summary.csv": b"a,b\n1,2\n"}
+    for name, data in files.items():
+        (mine / name).write_bytes(data)
+    capsys.readouterr()
+    assert main(["report", str(run), "--out", str(mine)]) != 0
+    err = capsys.readouterr().err.strip()
+    assert err == (f"skinfit: error: {mine}: holds files a skinfit report did not write: give a new or empty "
+                   f"folder, e.g. {mine / 'report'} (nothing was written)")
+    assert {p.name: p.read_bytes() for p in mine.iterdir()} == files
+    (tmp_path / "a_file").write_text("x")
+    assert main(["report", str(run), "--out", str(tmp_path / "a_file")]) != 0
+    assert (tmp_path / "a_file").read_text() == "x"
+
+    new = tmp_path / "new"
+    assert main(["report", str(run), "--out", str(new)]) == 0
+    assert (new / report.REPORT_MARKER).exists()
+    assert main(["report", str(run), "--out", str(new)]) == 0  # its own folder: written again
+    (new / report.REPORT_MARKER).unlink()  # a report folder from before the marker: its index.html says skinfit
+    assert main(["report", str(run), "--out", str(new)]) == 0 and (new / report.REPORT_MARKER).exists()
