@@ -192,8 +192,19 @@ def _cmd_fit(args):
     if args.resume and not checkpoint.exists():
         print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
     dataset = _cardless_csv(args)
+    model, data, priors = args.model, dataset or args.dataset, args.priors
+    if (out / "fit.nc").exists() or (out / "index.json").exists():  # results there: replaced only by a rerun
+        from .data import as_dataset
+        from .groups import check_out_dir
+        from .models import load_model
+        from .priors import load_priors
+
+        model = load_model(model)
+        data = as_dataset(data, model=model)
+        priors = load_priors(priors or model.id)
+        check_out_dir(out, model, priors, data)
     with CheckpointLock(checkpoint):
-        result = fit(args.model, dataset or args.dataset, priors=args.priors, rng=args.seed, split=split,
+        result = fit(model, data, priors=priors, rng=args.seed, split=split,
                      noise=args.noise, progress=not args.quiet,
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)

@@ -37,7 +37,7 @@ from .errors import InputError
 from .fit import fit, load_fit
 from .models import Model, load_model
 
-__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside",
+__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
            "record_source", "source_problem", "data_drift"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
@@ -150,7 +150,8 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     by : str or list of str
         Grouping column(s), e.g. ``"subject"`` or ``["subject", "material"]``.
     out_dir : path
-        Gets ``<group>/fit.nc``, ``<group>/summary.csv`` and ``index.json``.
+        Gets ``<group>/fit.nc``, ``<group>/summary.csv`` and ``index.json``; one holding the
+        results of other inputs is refused (:func:`check_out_dir`).
     seed : int, optional
         Base seed; group ``g`` is fitted with ``derive_seed(seed, g)``.  None draws fresh
         entropy, recorded in the index so the run can be repeated.
@@ -162,17 +163,22 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     """
     from .checkpoint import CheckpointLock, remove_stale_temps
 
+    from .priors import PriorSet, load_priors
+
     model = model if isinstance(model, Model) else load_model(model)
     from_file = not isinstance(dataset, Dataset)  # else it may be a subset: its hash is not the file's
     dataset = load_dataset(dataset) if from_file else dataset
+    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
     by = [by] if isinstance(by, str) else list(by)
+    check_out_dir(out_dir, model, priors, dataset, by)
     labels, levels = group_labels(dataset, by)
     base = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
     out_dir = Path(out_dir)
     labels = np.array(labels, dtype=object)
     rows = []
     header = {"model": model.id, "dataset": dataset.id, "by": by, "seed": base,
-              "dataset_path": card_path(dataset), "dataset_sha256": dataset.sha256, "dataset_is_file": from_file}
+              "dataset_path": card_path(dataset), "dataset_sha256": dataset.sha256, "dataset_is_file": from_file,
+              "model_sha256": model.sha256, "priors_sha256": priors.sha256}
     # the lock a plain `skinfit fit --out` takes: two runs on one folder never interleave
     with CheckpointLock(out_dir / "checkpoint.h5"):
         remove_stale_temps(out_dir)  # a killed run's half-written group files (writer pid dead)
@@ -265,6 +271,62 @@ def data_drift(fits):
             messages.append(f"{where}: fitted to {card} with sha256 {sha256[:12]}.., which now has "
                             f"{current[card][:12]}..: this result is not of the current data")
     return messages
+
+
+def check_out_dir(out_dir, model, priors, dataset, by=None):
+    """Refuse, before anything is fitted or written, an output folder that holds results of
+    other inputs: a single fit (``fit.nc``) or a run by groups (``index.json``, ``by`` the
+    grouping columns) made from another model card, prior file or dataset (their sha256 as
+    recorded; a model id where no sha256 was), or grouped otherwise, or the other kind of run.
+    Results of the same inputs (a rerun: another seed or sampler setting) may be replaced.
+    ``model``, ``priors``, ``dataset``: the Model, PriorSet and Dataset about to be fitted."""
+    out_dir = Path(out_dir)
+    single, index = out_dir / "fit.nc", out_dir / "index.json"
+    new = {"model_id": model.id, "model_sha256": model.sha256, "priors_sha256": priors.sha256,
+           "dataset_sha256": dataset.sha256}
+    if by is None and index.exists():
+        raise InputError(out_dir, "holds a run by groups (index.json): give a single fit another --out "
+                                  "(nothing was written)")
+    if by is not None and single.exists():
+        raise InputError(out_dir, "holds a single fit (fit.nc): give the run by groups another --out "
+                                  "(nothing was written)")
+    if by is None and single.exists():
+        try:
+            import h5netcdf
+
+            with h5netcdf.File(single, "r") as h:
+                old = {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in h.attrs.items()
+                       if k in (*new, "dataset_id")}
+        except (OSError, ValueError):
+            old = {}
+        what = (f"a fit of {old['model_id']} on {old.get('dataset_id', '?')}" if "model_id" in old
+                else "a fit.nc that skinfit cannot read")
+    elif by is not None and index.exists():
+        try:
+            doc = json.loads(index.read_text())
+            old = {"model_id": doc["model"], "dataset_sha256": doc["dataset_sha256"], "by": doc["by"],
+                   **{k: doc[k] for k in ("model_sha256", "priors_sha256") if k in doc}}
+        except (OSError, ValueError, KeyError, TypeError):
+            old = {}
+        new["by"] = list(by)
+        what = (f"a run of {old['model_id']} by {', '.join(map(str, old['by']))}" if "model_id" in old
+                else "an index.json that is not a skinfit run's")
+    else:
+        return
+    differ = [k for k in new if k in old and old[k] != new[k]]  # an older index records no card / prior sha256
+    if not old or differ:
+        raise InputError(out_dir, f"holds {what}, made from {_inputs_text(differ) if old else 'unknown inputs'} "
+                                  f"than this fit of {model.id} on {dataset.id}: give another --out, or remove "
+                                  f"its results to replace them (nothing was written)")
+
+
+def _inputs_text(keys):
+    """What differs, in words: "another model", "another prior file and other data", ..."""
+    parts = ["another model"] if "model_id" in keys else [
+        *(["another " + " / ".join(n for k, n in (("model_sha256", "model card"), ("priors_sha256", "prior file"))
+                                   if k in keys)] if {"model_sha256", "priors_sha256"} & set(keys) else []),
+        *(["other data"] if "dataset_sha256" in keys else [])]
+    return " and ".join(parts + (["another grouping"] if "by" in keys else []))
 
 
 def _write_json(path, doc):
