@@ -480,7 +480,7 @@ def _write_png(fig, path):
     fig.set_dpi(plots._DPI)
     plots._fix_layout(fig)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="pdf")
+    fig.savefig(buffer, format="pdf", metadata={"CreationDate": None})  # the same figure, the same bytes
     pdf = buffer.getvalue()
     document = pypdfium2.PdfDocument(pdf)
     page = document[0]

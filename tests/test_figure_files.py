@@ -61,3 +61,13 @@ def test_png_and_pdf_show_the_figure_agg_would_draw(tmp_path):
     finally:
         page.close()
         document.close()
+
+
+def test_the_same_figure_gives_the_same_files(tmp_path):
+    """No time stamp in the PDF: drawn twice, the PNG and PDF are byte for byte the same (a
+    regenerated report changes only the files whose figures changed)."""
+    report._write_png(_figure(), tmp_path / "a.png")
+    report._write_png(_figure(), tmp_path / "b.png")
+    assert (tmp_path / "a.pdf").read_bytes() == (tmp_path / "b.pdf").read_bytes()
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+    assert b"/CreationDate" not in (tmp_path / "a.pdf").read_bytes()
