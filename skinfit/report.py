@@ -14,6 +14,7 @@ import json
 import math
 import re
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -566,16 +567,30 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     -------
     pathlib.Path of index.html
     """
-    import jinja2
-
-    from . import __version__
-
     out = Path(out_dir)
     figdir = out / "figures"
     items = _as_fits(fits)
     if not items:
         raise InputError("skinfit report", "no fits given")
     _claim_folder(out)
+    from .checkpoint import CheckpointLock
+
+    with CheckpointLock(out / "report"):  # two reports into one folder never interleave their files
+        for name in _recorded_outputs(out):  # the previous report's tables and pages: none left stale
+            (out / name).unlink(missing_ok=True)
+        before, start = {p.name for p in out.iterdir()}, time.time_ns()
+        index = _write_contents(items, out, figdir, title=title, comparison=comparison, population=population,
+                                populations=populations, contrasts=contrasts, designs=designs)
+        _record_outputs(out, before, start)
+    return index
+
+
+def _write_contents(items, out, figdir, *, title, comparison, population, populations, contrasts, designs):
+    """The report's files (see :func:`write_report`), in a folder already claimed and locked."""
+    import jinja2
+
+    from . import __version__
+
     figdir.mkdir(parents=True, exist_ok=True)
     issues_all, sections, jobs = [], [], []
     per_model = {}
@@ -694,8 +709,30 @@ def _claim_folder(out):
             raise InputError(out, "holds files a skinfit report did not write: give a new or empty folder, e.g. "
                                   f"{out / 'report'} (nothing was written)")
     out.mkdir(parents=True, exist_ok=True)
-    (out / REPORT_MARKER).write_text("This folder was written by `skinfit report`; the next report into it "
-                                     "rewrites its files.\n", encoding="utf-8")
+    if not (out / REPORT_MARKER).exists():
+        _record_outputs(out, None, None)
+
+
+def _recorded_outputs(out):
+    """The files the previous report into ``out`` wrote at its top level (from its marker)."""
+    try:
+        names = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8")).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [n for n in names if isinstance(n, str) and n == Path(n).name and not n.startswith(".")]
+
+
+def _record_outputs(out, before, start):
+    """Write :data:`REPORT_MARKER`: the folder is a report's, and the top-level files this report
+    wrote (new since ``before``, or changed since ``start`` ns), which the next report into it
+    removes before writing its own: a table of a fit no longer reported never stays beside the
+    new page. Figures stay (reused by content, see :func:`render_figures`)."""
+    files = []
+    if before is not None:
+        files = sorted(p.name for p in out.iterdir() if p.is_file() and not p.name.startswith(".")
+                       and (p.name not in before or p.stat().st_mtime_ns >= start))
+    doc = {"written_by": "skinfit report: the next report into this folder rewrites it", "files": files}
+    (out / REPORT_MARKER).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
 
 
 def _break_at_underscores(value):

@@ -414,3 +414,33 @@ def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path,
     assert main(["report", str(run), "--out", str(new)]) == 0  # its own folder: written again
     (new / report.REPORT_MARKER).unlink()  # a report folder from before the marker: its index.html says skinfit
     assert main(["report", str(run), "--out", str(new)]) == 0 and (new / report.REPORT_MARKER).exists()
+
+
+def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_one(ea_fit, tmp_path, monkeypatch,
+                                                                                   capsys):
+    """The second report into a folder removes the tables and pages the first wrote that it does
+    not write (a fit no longer reported), keeps a file the user put there, and a report while
+    another holds the folder is refused with one line."""
+    import os
+
+    from skinfit.checkpoint import CheckpointLock
+
+    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
+    coulomb = skinfit.fit("electroadhesion_coulomb", "electroadhesion_synthetic", rng=2, max_steps=300,
+                          ess_target=50)
+    out = tmp_path / "r"
+    report.write_report({"ea": ea_fit, "coulomb": coulomb}, out)
+    assert (out / "coulomb_summary.csv").exists() and (out / "ea_summary.csv").exists()
+    (out / "notes.txt").write_text("mine")
+    report.write_report({"ea": ea_fit}, out)
+    tables = sorted(p.name for p in out.glob("*.csv"))
+    assert tables == ["ea_diagnostics.csv", "ea_summary.csv"]
+    assert (out / "notes.txt").read_text() == "mine" and "coulomb_summary.csv" not in (out / "index.html").read_text()
+    assert sorted(json.loads((out / report.REPORT_MARKER).read_text())["files"]) == \
+        ["ea_diagnostics.csv", "ea_summary.csv", "index.html", "summary.md"]
+
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.suffix != ".lock"}
+    with CheckpointLock(out / "report"):  # another report writing into it
+        with pytest.raises(skinfit.InputError, match=f"is in use by pid {os.getpid()}"):
+            report.write_report({"ea": ea_fit}, out)
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.suffix != ".lock"} == before
