@@ -123,3 +123,15 @@ def test_a_fit_worker_that_finds_other_inputs_than_planned_fits_nothing(tmp_path
         with pytest.raises(InputError, match=rf"the fit worker found other {which} for electroadhesion_coulomb"):
             demo._run_one(other, path)
         assert not path.exists()
+
+
+def test_a_demo_into_a_folder_of_the_users_files_stops_before_fitting(tmp_path):
+    from skinfit.demo import run_demo
+    from skinfit.errors import InputError
+
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "index.html").write_text("<html>my page</html>")
+    with pytest.raises(InputError, match="holds files a skinfit report did not write"):
+        run_demo(tmp_path / "runs", site, echo=lambda *a: None)
+    assert not (tmp_path / "runs").exists() and [p.name for p in site.iterdir()] == ["index.html"]
