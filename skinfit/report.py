@@ -876,11 +876,22 @@ def _summary_md(ctx):
 
 # ---- command line ---------------------------------------------------------------------------
 def _collect_runs(paths):
-    """Run directories or fit.nc files; a directory of per-group runs gives all its fits."""
+    """Run directories or fit.nc files. A directory with an index.json (a ``skinfit fit --by``
+    run, a campaign) gives the fits its index lists as done, and names on stderr any fit.nc
+    below it that the index does not list (another run's, not reported); another directory
+    gives every fit.nc below it."""
     out = []
     for p in map(Path, paths):
         if p.is_file() or (p / "fit.nc").exists():
             out.append(p)
+        elif (p / "index.json").is_file():
+            listed = _indexed_fits(p / "index.json")
+            known = {f.resolve() for f in listed}
+            extra = [f for f in sorted(p.glob("**/fit.nc")) if f.resolve() not in known]
+            if extra:
+                print(f"skinfit report: warning: {len(extra)} fit file(s) below {p} are not in its index.json "
+                      f"(e.g. {extra[0]}): not reported (name them to report them)", file=sys.stderr)
+            out += listed
         elif p.is_dir():
             found = sorted(p.glob("**/fit.nc"))
             if not found:
@@ -889,6 +900,35 @@ def _collect_runs(paths):
         else:
             raise InputError(p, "no such run directory or fit file")
     return out
+
+
+def _indexed_fits(index):
+    """The fit files an index.json lists: every group of a ``--by`` run, the done fits of a
+    campaign (others are named on stderr); a listed file that is missing is an error."""
+    try:
+        doc = json.loads(index.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(index, f"not readable as JSON ({exc})") from None
+    if isinstance(doc, dict) and isinstance(doc.get("groups"), list):
+        rows = doc["groups"]
+    elif isinstance(doc, list):
+        rows = [r for r in doc if isinstance(r, dict) and r.get("status", "done") in ("done", "complete")]
+        if len(rows) < len(doc):
+            print(f"skinfit report: {len(doc) - len(rows)} fit(s) of {index} not complete (failed or pending): "
+                  "not reported", file=sys.stderr)
+    else:
+        raise InputError(index, "not the index of a `skinfit fit --by` run or of a campaign")
+    paths = []
+    for i, r in enumerate(rows, start=1):
+        if not isinstance(r, dict) or not isinstance(r.get("path"), str):
+            raise InputError(index, "expected a 'path' for each fit", row=i)
+        path = Path(r["path"]) if Path(r["path"]).is_absolute() else index.parent / r["path"]
+        if not path.is_file():
+            raise InputError(index, f"lists {r['path']}, which does not exist", row=i)
+        paths.append(path)
+    if not paths:
+        raise InputError(index, "lists no completed fit")
+    return paths
 
 
 def _saved_populations(paths):

@@ -444,3 +444,31 @@ def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_o
         with pytest.raises(skinfit.InputError, match=f"is in use by pid {os.getpid()}"):
             report.write_report({"ea": ea_fit}, out)
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.suffix != ".lock"} == before
+
+
+def test_a_report_of_a_run_reports_the_fits_its_index_lists(ea_fit, tmp_path, monkeypatch, capsys):
+    """`skinfit report RUN` of a run with an index.json (a --by run, a campaign): the fits it
+    lists, and a word on a fit file below RUN that it does not list (another run's, left there)
+    instead of reporting it as if it were one of the run's; a listed file missing is an error."""
+    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
+    run = tmp_path / "run"
+    ea_fit.save(run / "a" / "fit.nc")
+    (run / "index.json").write_text(json.dumps({"model": "electroadhesion", "groups": [{"group": "g=a",
+                                                                                      "path": "a/fit.nc"}]}))
+    coulomb = skinfit.fit("electroadhesion_coulomb", "electroadhesion_synthetic", rng=2, max_steps=300,
+                          ess_target=50)
+    coulomb.save(run / "left" / "over" / "fit.nc")
+    capsys.readouterr()
+    assert main(["report", str(run), "--out", str(tmp_path / "r"), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out[out.index("{"):])["fits"] == ["electroadhesion__electroadhesion_synthetic"]
+    assert (f"skinfit report: warning: 1 fit file(s) below {run} are not in its index.json (e.g. "
+            f"{run / 'left' / 'over' / 'fit.nc'}): not reported") in err
+    # a campaign's index: done fits only, the failed one named
+    (run / "index.json").write_text(json.dumps([{"status": "complete", "path": "a/fit.nc"},
+                                                {"status": "failed: ValueError: x", "path": "b/fit.nc"}]))
+    assert main(["report", str(run), "--out", str(tmp_path / "r"), "--json"]) == 0
+    assert "1 fit(s) of" in capsys.readouterr().err
+    (run / "index.json").write_text(json.dumps({"groups": [{"group": "g=a", "path": "gone/fit.nc"}]}))
+    assert main(["report", str(run), "--out", str(tmp_path / "r")]) == 2
+    assert "lists gone/fit.nc, which does not exist" in capsys.readouterr().err
