@@ -482,7 +482,7 @@ def _write_png(fig, path):
     plots._fix_layout(fig)
     buffer = io.BytesIO()
     fig.savefig(buffer, format="pdf", metadata={"CreationDate": None})  # the same figure, the same bytes
-    pdf = buffer.getvalue()
+    pdf = _stable_font_tags(buffer.getvalue())
     document = pypdfium2.PdfDocument(pdf)
     page = document[0]
     try:  # convert: a copy, independent of PDFium's bitmap
@@ -493,6 +493,29 @@ def _write_png(fig, path):
     image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
         path, format="PNG", compress_level=6)
     Path(path).with_suffix(".pdf").write_bytes(pdf)
+
+
+_SUBSET_TAG = re.compile(rb"(/(?:BaseFont|FontName|Name) /)([A-Z]{6})(?=\+)")
+
+
+def _stable_font_tags(pdf):
+    """``pdf`` with its font-subset tags (``/BaseFont /GXDUII+DejaVuSans``) made independent of
+    the process: matplotlib derives them from ``hash()`` of the subset's glyphs, which Python
+    salts per process, so the same figure gave other bytes in each. Each distinct tag becomes,
+    in order of first appearance, AAAAAA, AAAAAB, ...: the same length, so every byte offset and
+    the cross-reference table stay valid (PDF reference 1.7, 5.5.3: the tag is arbitrary)."""
+    tags = {}
+
+    def fixed(match):
+        if match.group(2) not in tags:
+            n, letters = len(tags), []
+            for _ in range(6):
+                n, r = divmod(n, 26)
+                letters.append(chr(65 + r))
+            tags[match.group(2)] = "".join(reversed(letters)).encode()
+        return match.group(1) + tags[match.group(2)]
+
+    return _SUBSET_TAG.sub(fixed, pdf)
 
 
 def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):

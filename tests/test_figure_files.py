@@ -64,10 +64,28 @@ def test_png_and_pdf_show_the_figure_agg_would_draw(tmp_path):
 
 
 def test_the_same_figure_gives_the_same_files(tmp_path):
-    """No time stamp in the PDF: drawn twice, the PNG and PDF are byte for byte the same (a
-    regenerated report changes only the files whose figures changed)."""
-    report._write_png(_figure(), tmp_path / "a.png")
-    report._write_png(_figure(), tmp_path / "b.png")
-    assert (tmp_path / "a.pdf").read_bytes() == (tmp_path / "b.pdf").read_bytes()
+    """No time stamp in the PDF and font-subset tags independent of Python's per-process hash
+    salt: drawn in two processes (PYTHONHASHSEED 1 and 2), the PNG and PDF are byte for byte
+    the same (a regenerated report changes only the files whose figures changed), and the PDF
+    still opens as one page."""
+    import os
+    import subprocess
+    import sys
+
+    draw = ("import sys\nfrom matplotlib.figure import Figure\nfrom skinfit import report\n"
+            "fig = Figure(figsize=(4, 2), layout='constrained')\nax = fig.subplots()\n"
+            "ax.plot([0, 1], [0, 1]); ax.set(xlabel='normal force [N]', title='a title')\n"
+            "report._write_png(fig, sys.argv[1])\n")
+    for seed, name in (("1", "a.png"), ("2", "b.png")):
+        subprocess.run([sys.executable, "-c", draw, str(tmp_path / name)], check=True,
+                       env={**os.environ, "PYTHONHASHSEED": seed, "MPLBACKEND": "Agg"})
+    a, b = (tmp_path / "a.pdf").read_bytes(), (tmp_path / "b.pdf").read_bytes()
+    assert a == b and b"/CreationDate" not in a and b"/BaseFont /AAAAAA+DejaVuSans" in a
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
-    assert b"/CreationDate" not in (tmp_path / "a.pdf").read_bytes()
+    import pypdfium2
+
+    document = pypdfium2.PdfDocument(a)
+    try:
+        assert len(document) == 1
+    finally:
+        document.close()
