@@ -314,10 +314,12 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
     else:
         return
     differ = [k for k in new if k in old and old[k] != new[k]]  # an older index records no card / prior sha256
-    if not old or differ:
-        raise InputError(out_dir, f"holds {what}, made from {_inputs_text(differ) if old else 'unknown inputs'} "
-                                  f"than this fit of {model.id} on {dataset.id}: give another --out, or remove "
-                                  f"its results to replace them (nothing was written)")
+    if not old:
+        raise InputError(out_dir, f"holds {what}: give another --out, or remove it to fit here (nothing was written)")
+    if differ:
+        raise InputError(out_dir, f"holds {what}, made from {_inputs_text(differ)} than this fit of {model.id} on "
+                                  f"{dataset.id}: give another --out, or remove its results to replace them "
+                                  f"(nothing was written)")
 
 
 def _inputs_text(keys):

@@ -249,3 +249,8 @@ def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_pa
         refused(["fit", "electroadhesion_coulomb", str(path), "--out", str(run), *quick], run,
                 "a run by groups (index.json): give a single fit another --out (nothing was written)")
         assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), *quick]) == 0
+        damaged = tmp_path / "damaged"
+        damaged.mkdir()
+        (damaged / "fit.nc").write_bytes(b"not a netCDF file")
+        refused(["fit", "electroadhesion_coulomb", str(path), "--out", str(damaged), *quick], damaged,
+                "a fit.nc that skinfit cannot read: give another --out, or remove it to fit here (nothing was written)")
