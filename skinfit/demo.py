@@ -162,10 +162,10 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     """Fit, compare and report every shipped dataset; returns the report's index.html path."""
     from .fit import load_fit
     from .paths import explicit_search_path, set_search_path
-    from .report import _claim_folder, write_report
+    from .report import claim_report_folder, write_report
 
     out = Path(out)
-    _claim_folder(Path(report))  # a folder of the user's files is refused now, not after the fits
+    claim_report_folder(Path(report))  # a folder of the user's files is refused now, not after the fits
     plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]
     paths = [_path(out, p) for p in plan]
     reused = [_reuse(path, p) for p, path in zip(plan, paths)]

@@ -38,6 +38,7 @@ from .fit import fit, load_fit
 from .models import Model, load_model
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
+           "read_index",
            "record_source", "source_problem", "data_drift"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
@@ -199,6 +200,41 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     return pd.DataFrame(rows)
 
 
+def read_index(path):
+    """The completed fits a run's index.json lists, for readers of either kind of run: a
+    ``skinfit fit --by`` run (a dict with ``groups``) or a campaign (a list of rows, of which
+    those with status done or complete). ``path``: the index or its folder.
+
+    Returns ``(rows, skipped)``: each row a dict with ``model``, ``dataset``, ``group`` (None
+    for a whole dataset) and ``path`` (a relative path read from the index's folder; the file
+    must exist), and the number of campaign rows not complete (failed or pending)."""
+    path = Path(path)
+    index = path / "index.json" if path.is_dir() else path
+    if not index.exists():
+        raise InputError(index, "no such index (expected the index.json of `skinfit fit --by` or of a campaign)")
+    try:
+        doc = json.loads(index.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(index, f"not readable as JSON ({exc})") from None
+    if isinstance(doc, dict) and isinstance(doc.get("groups"), list):
+        listed = [dict(g, model=doc.get("model"), dataset=doc.get("dataset")) if isinstance(g, dict) else g
+                  for g in doc["groups"]]
+    elif isinstance(doc, list):
+        listed = [r for r in doc if not isinstance(r, dict) or r.get("status", "done") in ("done", "complete")]
+    else:
+        raise InputError(index, "expected a `fit --by` index (with 'groups') or a campaign index (a list)")
+    rows = []
+    for i, r in enumerate(listed, start=1):
+        if not isinstance(r, dict) or not isinstance(r.get("path"), str):
+            raise InputError(index, "expected a 'path' for each fit", row=i)
+        fit_path = Path(r["path"]) if Path(r["path"]).is_absolute() else index.parent / r["path"]
+        if not fit_path.is_file():
+            raise InputError(index, f"lists {r['path']}, which does not exist", row=i)
+        rows.append({"model": r.get("model"), "dataset": r.get("dataset"), "group": r.get("group"),
+                     "path": fit_path})
+    return rows, (len(doc) - len(listed) if isinstance(doc, list) else 0)
+
+
 def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
     """The fits of a :func:`fit_by` run directory (its ``index.json``): ``{label: Fit}``.
 
@@ -282,40 +318,30 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
     ``model``, ``priors``, ``dataset``: the Model, PriorSet and Dataset about to be fitted."""
     out_dir = Path(out_dir)
     single, index = out_dir / "fit.nc", out_dir / "index.json"
+    mine, other, held, this = ((single, index, "a run by groups (index.json)", "a single fit") if by is None else
+                               (index, single, "a single fit (fit.nc)", "the run by groups"))
+    if other.exists():
+        raise InputError(out_dir, f"holds {held}: give {this} another --out (nothing was written)")
+    if not mine.exists():
+        return
     new = {"model_id": model.id, "model_sha256": model.sha256, "priors_sha256": priors.sha256,
            "dataset_sha256": dataset.sha256}
-    if by is None and index.exists():
-        raise InputError(out_dir, "holds a run by groups (index.json): give a single fit another --out "
-                                  "(nothing was written)")
-    if by is not None and single.exists():
-        raise InputError(out_dir, "holds a single fit (fit.nc): give the run by groups another --out "
-                                  "(nothing was written)")
-    if by is None and single.exists():
-        try:
-            import h5netcdf
-
-            with h5netcdf.File(single, "r") as h:
-                old = {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in h.attrs.items()
-                       if k in (*new, "dataset_id")}
-        except (OSError, ValueError):
-            old = {}
-        what = (f"a fit of {old['model_id']} on {old.get('dataset_id', '?')}" if "model_id" in old
-                else "a fit.nc that skinfit cannot read")
-    elif by is not None and index.exists():
-        try:
-            doc = json.loads(index.read_text())
+    try:
+        if by is None:
+            attrs = load_fit(single).attrs
+            old = {k: str(attrs[k]) for k in new if k in attrs}
+            what = f"a fit of {attrs['model_id']} on {attrs.get('dataset_id', '?')}"
+        else:
+            doc = json.loads(index.read_text(encoding="utf-8"))
             old = {"model_id": doc["model"], "dataset_sha256": doc["dataset_sha256"], "by": doc["by"],
                    **{k: doc[k] for k in ("model_sha256", "priors_sha256") if k in doc}}
-        except (OSError, ValueError, KeyError, TypeError):
-            old = {}
-        new["by"] = list(by)
-        what = (f"a run of {old['model_id']} by {', '.join(map(str, old['by']))}" if "model_id" in old
-                else "an index.json that is not a skinfit run's")
-    else:
-        return
+            new["by"] = list(by)
+            what = f"a run of {doc['model']} by {', '.join(map(str, doc['by']))}"
+    except (InputError, OSError, ValueError, KeyError, TypeError):
+        article = "a" if by is None else "an"
+        raise InputError(out_dir, f"holds {article} {mine.name} that skinfit cannot read: give another --out, or "
+                                  "remove it to fit here (nothing was written)") from None
     differ = [k for k in new if k in old and old[k] != new[k]]  # an older index records no card / prior sha256
-    if not old:
-        raise InputError(out_dir, f"holds {what}: give another --out, or remove it to fit here (nothing was written)")
     if differ:
         raise InputError(out_dir, f"holds {what}, made from {_inputs_text(differ)} than this fit of {model.id} on "
                                   f"{dataset.id}: give another --out, or remove its results to replace them "

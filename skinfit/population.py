@@ -73,20 +73,10 @@ def load_run(path, model=None):
     (its ``index.json``).  Labels as the user wrote them: ``S01`` for a single grouping column
     (``subject=S01`` in the index), the full ``col=a,col2=b`` otherwise; a campaign with
     several datasets adds ``dataset/``.  ``model`` picks one model of a campaign."""
-    path = Path(path)
-    index = path / "index.json" if path.is_dir() else path
-    if not index.exists():
-        raise InputError(index, "no such index (expected the index.json of `skinfit fit --by` or of a campaign)")
-    try:
-        doc = json.loads(index.read_text())
-    except json.JSONDecodeError as exc:
-        raise InputError(index, f"not JSON ({exc})") from None
-    if isinstance(doc, dict) and "groups" in doc:
-        rows = [dict(g, model=doc.get("model"), dataset=doc.get("dataset")) for g in doc["groups"]]
-    elif isinstance(doc, list):
-        rows = [r for r in doc if r.get("status", "done") in ("done", "complete")]
-    else:
-        raise InputError(index, "expected a `fit --by` index (with 'groups') or a campaign index (a list)")
+    from .groups import read_index
+
+    index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
+    rows, _ = read_index(index)
     models = sorted({r.get("model") for r in rows})
     if model is None and len(models) > 1:
         raise InputError(index, f"fits of several models ({', '.join(models)}): choose one with --model", field="model")
@@ -101,10 +91,7 @@ def load_run(path, model=None):
             label = label.split("=", 1)[1]
         if len(datasets) > 1 and r.get("group"):
             label = f"{r.get('dataset')}/{label}"
-        p = Path(r["path"])
-        if not p.is_absolute() and not p.exists():
-            p = index.parent / p
-        fits[label] = _load_light(p)
+        fits[label] = _load_light(r["path"])
     return fits
 
 

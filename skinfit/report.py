@@ -26,7 +26,7 @@ from .labels import parameter_units
 from .paths import package_version
 from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
-__all__ = ["write_report", "fit_diagnostics", "cli_report"]
+__all__ = ["write_report", "fit_diagnostics", "cli_report", "claim_report_folder"]
 
 
 def _lazy_module(name):
@@ -595,7 +595,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
     items = _as_fits(fits)
     if not items:
         raise InputError("skinfit report", "no fits given")
-    _claim_folder(out)
+    claim_report_folder(out)
     from .checkpoint import CheckpointLock
 
     with CheckpointLock(out / "report"):  # two reports into one folder never interleave their files
@@ -714,11 +714,12 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
 REPORT_MARKER = ".skinfit-report"
 
 
-def _claim_folder(out):
+def claim_report_folder(out):
     """Make ``out`` a report folder: a new or empty one, or one a report wrote (it holds
     :data:`REPORT_MARKER`, or the index.html of a report written before the marker). A folder
     of other files is refused before anything is written, so that a careless ``--out .`` never
     overwrites the user's own index.html, summary.md or CSV tables."""
+    out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(out, "is a file: --out names the folder the report is written into")
     if out.is_dir() and not (out / REPORT_MARKER).exists() and any(out.iterdir()):
@@ -926,32 +927,17 @@ def _collect_runs(paths):
 
 
 def _indexed_fits(index):
-    """The fit files an index.json lists: every group of a ``--by`` run, the done fits of a
-    campaign (others are named on stderr); a listed file that is missing is an error."""
-    try:
-        doc = json.loads(index.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise InputError(index, f"not readable as JSON ({exc})") from None
-    if isinstance(doc, dict) and isinstance(doc.get("groups"), list):
-        rows = doc["groups"]
-    elif isinstance(doc, list):
-        rows = [r for r in doc if isinstance(r, dict) and r.get("status", "done") in ("done", "complete")]
-        if len(rows) < len(doc):
-            print(f"skinfit report: {len(doc) - len(rows)} fit(s) of {index} not complete (failed or pending): "
-                  "not reported", file=sys.stderr)
-    else:
-        raise InputError(index, "not the index of a `skinfit fit --by` run or of a campaign")
-    paths = []
-    for i, r in enumerate(rows, start=1):
-        if not isinstance(r, dict) or not isinstance(r.get("path"), str):
-            raise InputError(index, "expected a 'path' for each fit", row=i)
-        path = Path(r["path"]) if Path(r["path"]).is_absolute() else index.parent / r["path"]
-        if not path.is_file():
-            raise InputError(index, f"lists {r['path']}, which does not exist", row=i)
-        paths.append(path)
-    if not paths:
+    """The fit files an index.json lists (:func:`skinfit.groups.read_index`), naming on stderr
+    a campaign's fits that are not complete."""
+    from .groups import read_index
+
+    rows, skipped = read_index(index)
+    if skipped:
+        print(f"skinfit report: {skipped} fit(s) of {index} not complete (failed or pending): not reported",
+              file=sys.stderr)
+    if not rows:
         raise InputError(index, "lists no completed fit")
-    return paths
+    return [r["path"] for r in rows]
 
 
 def _saved_populations(paths):
@@ -1021,7 +1007,7 @@ def cli_report(args):
         print(f"skinfit report: warning: {message}", file=sys.stderr)
     items = _as_fits(fits)
     if items:  # refused before the population's cache is written into it
-        _claim_folder(Path(args.out))
+        claim_report_folder(Path(args.out))
     comparison = _comparisons(items)
     populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
                                             cache_dir=Path(args.out) / ".cache", saved=_saved_populations(args.runs))

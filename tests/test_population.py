@@ -373,3 +373,18 @@ def test_sbc_of_100_populations_normal_and_lognormal_with_a_failing_control():
         _, p = run_sbc(family, 100, seed=1)
         assert min(p["mu"], p["tau"]) > 0.01, (family, p)
         assert p["tau_control"] < 0.01, (family, p)
+
+
+def test_a_run_is_read_from_its_own_folder_whatever_the_working_folder(thirteen, tmp_path, monkeypatch):
+    """The paths in index.json are relative to the run's folder: a same-named file under the
+    working folder (another run's S01) is never read in its place."""
+    import shutil
+
+    run, fits, _ = thirteen
+    groups = json.loads((run / "index.json").read_text())["groups"]
+    s01, s02 = (next(g["path"] for g in groups if g["group"] == f"subject={s}") for s in ("S01", "S02"))
+    (tmp_path / s01).parent.mkdir(parents=True)
+    shutil.copy(run / s02, tmp_path / s01)  # S02's fit where the working folder would find S01's path
+    monkeypatch.chdir(tmp_path)
+    np.testing.assert_array_equal(load_run(run)["S01"].group("posterior")["mu"].values,
+                                  fits["S01"].group("posterior")["mu"].values)
