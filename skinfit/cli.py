@@ -157,7 +157,7 @@ def _parse_split(items):
 
 
 def _cmd_fit(args):
-    from .fit import fit
+    from .fit import fit, resolve_inputs
 
     out = Path(args.out)
     split = _parse_split(args.split) or None
@@ -186,23 +186,15 @@ def _cmd_fit(args):
             return 3
         return 0
     from .checkpoint import CheckpointLock
+    from .groups import check_out_dir
 
     t0 = time.perf_counter()
     checkpoint = out / "checkpoint.h5"
     if args.resume and not checkpoint.exists():
         print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
     dataset = _cardless_csv(args)
-    model, data, priors = args.model, dataset or args.dataset, args.priors
-    if (out / "fit.nc").exists() or (out / "index.json").exists():  # results there: replaced only by a rerun
-        from .data import as_dataset
-        from .groups import check_out_dir
-        from .models import load_model
-        from .priors import load_priors
-
-        model = load_model(model)
-        data = as_dataset(data, model=model)
-        priors = load_priors(priors or model.id)
-        check_out_dir(out, model, priors, data)
+    model, data, priors = resolve_inputs(args.model, dataset or args.dataset, args.priors)
+    check_out_dir(out, model, priors, data)  # results there: replaced only by a rerun of the same inputs
     with CheckpointLock(checkpoint):
         result = fit(model, data, priors=priors, rng=args.seed, split=split,
                      noise=args.noise, progress=not args.quiet,

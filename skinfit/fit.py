@@ -41,7 +41,7 @@ from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
 from .guardrails import check_run
 
-__all__ = ["fit", "Fit", "load_fit", "as_generator"]
+__all__ = ["fit", "Fit", "load_fit", "as_generator", "resolve_inputs"]
 
 defer_imports()
 
@@ -165,9 +165,7 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     _fitting()
     _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
                     checkpoint_every=checkpoint_every)
-    model = model if isinstance(model, Model) else load_model(model)
-    dataset = as_dataset(dataset, model=model, units=units)
-    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    model, dataset, priors = resolve_inputs(model, dataset, priors, units=units)
     seed_drawn = rng is None
     if seed_drawn and resume and checkpoint is not None and Path(checkpoint).exists():
         from .checkpoint import load_checkpoint
@@ -222,6 +220,17 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         if w["check"] != "convergence":
             warnings.warn(f"{model.id} on {dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
     return Fit(idata, posterior=post, deferred=deferred)
+
+
+def resolve_inputs(model, dataset, priors=None, *, units=None):
+    """The Model, Dataset and PriorSet :func:`fit` fits, from what it accepts: ids, paths or
+    loaded objects; the priors default to the model's prior file. Loaded objects pass through,
+    so a caller that resolves them first (to check them) loads nothing twice."""
+    _fitting()  # PriorSet and load_priors
+    model = model if isinstance(model, Model) else load_model(model)
+    dataset = as_dataset(dataset, model=model, units=units)
+    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    return model, dataset, priors
 
 
 def _check_settings(rng, **settings):
