@@ -82,6 +82,14 @@ class PopulationView:
     def sampler(self):
         return dict(getattr(self.result, "sampler", {}) or {})
 
+    def origin(self):
+        """The file the result was read from; empty when it was computed for the report."""
+        return getattr(self.result, "origin", "") or ""
+
+    def correlation_prior(self):
+        """The prior of the correlations of a correlated population; None for an independent one."""
+        return (dict(getattr(self.result, "hyperpriors", {}) or {}).get("_correlation") or {}).get("prior")
+
     def population_interval(self, parameter):
         """The population distribution of ``parameter`` (natural units) at the posterior medians
         of its hyper-parameters: median and central 94% range, ``mu -+ 1.881 tau`` in the
@@ -125,8 +133,9 @@ def population_section(result):
     """Tables of a population result: hyper-parameters, and shrunk beside separate estimates.
 
     Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
-    "sampler", "effects": DataFrame or None, "warnings": [text], "intervals": {parameter: the
-    population distribution's median and 94% range}}.
+    "hyperprior_table": DataFrame, "sampler", "sampler_text", "effects": DataFrame or None,
+    "warnings": [text], "origin": the file read or "", "correlation": the correlation prior or
+    None, "intervals": {parameter: the population distribution's median and 94% range}}.
     """
     view = result if isinstance(result, PopulationView) else PopulationView(result)
     hyper = view.hyper_table().set_index(["parameter", "quantity"])
@@ -138,8 +147,7 @@ def population_section(result):
     return {"parameters": view.parameters, "hyper": hyper, "subjects": subjects,
             "hyperpriors": view.hyperpriors(), "hyperprior_table": hyperprior_table(view.hyperpriors()),
             "sampler": view.sampler(), "sampler_text": sampler_text(view.sampler()), "effects": view.effects(),
-            "warnings": view.warnings(), "origin": getattr(view.result, "origin", "") or "",
-            "correlation": dict(getattr(view.result, "hyperpriors", {}) or {}).get("_correlation"),
+            "warnings": view.warnings(), "origin": view.origin(), "correlation": view.correlation_prior(),
             "intervals": {p: view.population_interval(p) for p in view.parameters}}
 
 
