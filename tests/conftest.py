@@ -20,6 +20,15 @@ def ea_fit():
     return skinfit.fit("electroadhesion", "electroadhesion_synthetic", rng=1)
 
 
+@pytest.fixture
+def no_figures(monkeypatch):
+    """Reports written without drawing their figures (each figure job reported as drawn), for
+    tests of what a report does with its folder, tables and text."""
+    from skinfit import report
+
+    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _figure_store(tmp_path_factory):
     """Figures drawn by the tests are kept in a folder of this session (and seen by the CLI

@@ -386,11 +386,10 @@ def test_table_names_break_at_their_underscores_and_stay_escaped(written):
     assert str(report._break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
 
 
-def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path, monkeypatch, capsys):
+def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path, no_figures, capsys):
     """`--out` naming a folder of the user's own files (index.html, summary.md, a CSV): refused
     with one line naming it, and not a byte changed or added; a folder an earlier report wrote
     (its marker, or a skinfit index.html from before the marker) is written again."""
-    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
     run = tmp_path / "run"
     ea_fit.save(run / "fit.nc")
     mine = tmp_path / "site"
@@ -416,8 +415,7 @@ def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path,
     assert main(["report", str(run), "--out", str(new)]) == 0 and (new / report.REPORT_MARKER).exists()
 
 
-def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_one(ea_fit, tmp_path, monkeypatch,
-                                                                                   capsys):
+def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_one(ea_fit, tmp_path, no_figures):
     """The second report into a folder removes the tables and pages the first wrote that it does
     not write (a fit no longer reported), keeps a file the user put there, and a report while
     another holds the folder is refused with one line."""
@@ -425,7 +423,6 @@ def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_o
 
     from skinfit.checkpoint import CheckpointLock
 
-    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
     coulomb = skinfit.fit("electroadhesion_coulomb", "electroadhesion_synthetic", rng=2, max_steps=300,
                           ess_target=50)
     out = tmp_path / "r"
@@ -446,11 +443,10 @@ def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_o
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.is_file() and p.suffix != ".lock"} == before
 
 
-def test_a_report_of_a_run_reports_the_fits_its_index_lists(ea_fit, tmp_path, monkeypatch, capsys):
+def test_a_report_of_a_run_reports_the_fits_its_index_lists(ea_fit, tmp_path, no_figures, capsys):
     """`skinfit report RUN` of a run with an index.json (a --by run, a campaign): the fits it
     lists, and a word on a fit file below RUN that it does not list (another run's, left there)
     instead of reporting it as if it were one of the run's; a listed file missing is an error."""
-    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
     run = tmp_path / "run"
     ea_fit.save(run / "a" / "fit.nc")
     (run / "index.json").write_text(json.dumps({"model": "electroadhesion", "groups": [{"group": "g=a",

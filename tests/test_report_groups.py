@@ -114,14 +114,13 @@ def _population_note(index):
 
 
 def test_report_of_a_run_shows_the_population_saved_for_its_fits_and_never_another(subject_fits, tmp_path,
-                                                                                    monkeypatch, capsys):
+                                                                                    no_figures, capsys):
     """`skinfit population RUN` (the user's choices: two parameters, correlated) then `skinfit
     report RUN`: the report shows that population, saying where it is from; once a subject is
     fitted again, the saved one is named as made from other fits and not shown."""
     from skinfit.cli import main
     from skinfit.population import load_population
 
-    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
     run = _by_run(subject_fits, tmp_path / "run")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
