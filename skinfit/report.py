@@ -9,6 +9,7 @@ version that produced it. Reads only saved results.
 """
 
 import contextlib
+import gc
 import hashlib
 import json
 import math
@@ -333,7 +334,10 @@ def _render_one(i):
     """Draw figure job ``i`` of :data:`_JOBS` into its PNG and PDF (top level: runs in a forked
     worker, which inherits the fits and jobs, so nothing is pickled but the index)."""
     job = _JOBS[i]
-    return _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
+    error = _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
+    if not gc.isenabled():  # a figure worker (_init_worker): the figure's garbage, collected once
+        gc.collect(1)
+    return error
 
 
 @contextlib.contextmanager
@@ -343,8 +347,6 @@ def _frozen_heap():
     collections do not walk them again and again, copying the pages they touch (measured in
     bench/results/report.md). Put back afterwards, unless the caller had frozen objects itself
     (then its own choice is kept)."""
-    import gc
-
     if gc.get_freeze_count():
         yield
         return
@@ -356,10 +358,14 @@ def _frozen_heap():
 
 
 def _init_worker(parent):
-    """A figure worker ends when the report process that forked it dies (even by SIGKILL)."""
+    """A figure worker ends when the report process that forked it dies (even by SIGKILL). Its
+    garbage collector runs once after each figure (:func:`_render_one`) instead of on every
+    few thousand objects made, which a figure's artists triggered ~60 times each (2.5% of
+    the figures' time, bench/results/report.md)."""
     from .checkpoint import watch_parent  # not campaign's: that imports the fitting machinery
 
     watch_parent(parent)
+    gc.disable()
 
 
 def render_figures(fits, jobs, figdir, workers=None):
