@@ -471,21 +471,39 @@ def test_two_observables_with_overlapping_levels_get_a_panel_per_level(tmp_path)
 
 def test_log_axis_makes_only_the_ticks_in_view():
     """A log axis keeps every tick mark in view (minor at 2..9 x 10^k) but makes no tick for the
-    positions beyond its ends that matplotlib's log locators also return."""
+    positions beyond its ends that matplotlib's log locators also return; its minor marks are one
+    artist, not a Tick each, and look exactly as matplotlib's own minor ticks at those places."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(4, 3))
-    ax = fig.subplots()
-    ax.plot([0.07, 3.2], [1, 2])
-    ax.set_xscale("log")
-    ax.set_xlim(0.07, 3.2)  # 1.66 decades: majors at the decades
-    plots._log_ticks(ax, "x")
-    FigureCanvasAgg(fig).draw()
+    def drawn(minor):  # "marks" (skinfit's), "ticks" (matplotlib's, at the same places), or "none"
+        fig = Figure(figsize=(4, 3), dpi=100)
+        ax = fig.subplots()
+        ax.plot([0.07, 3.2], [1, 2])
+        ax.set_xscale("log")
+        ax.set_xlim(0.07, 3.2)  # 1.66 decades: majors at the decades
+        plots._log_ticks(ax, "x")
+        marks = plots._MinorMarks.of(ax, "x")
+        if minor == "ticks":
+            ax.xaxis.set_minor_locator(matplotlib.ticker.FixedLocator(marks.positions()))
+        if minor != "marks":
+            marks.remove()
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        return ax, marks, np.asarray(canvas.buffer_rgba())[..., :3].astype(int)
+
+    import matplotlib.ticker
+
+    ax, marks, image = drawn("marks")
     np.testing.assert_allclose(ax.xaxis.get_majorticklocs(), [0.1, 1.0])
     minor = [0.07, 0.08, 0.09] + [k / 10 for k in range(2, 10)] + [2.0, 3.0]
-    np.testing.assert_allclose(ax.xaxis.get_minorticklocs(), minor)
-    assert len(ax.xaxis.minorTicks) == len(minor) and len(ax.xaxis.majorTicks) == 2
+    np.testing.assert_allclose(marks.positions(), minor)
+    assert len(ax.xaxis.majorTicks) == 2 and len(ax.xaxis.get_minorticklocs()) == 0
+    reference_ax, _, reference = drawn("ticks")
+    np.testing.assert_allclose(reference_ax.xaxis.get_minorticklocs(), minor)
+    assert len(reference_ax.xaxis.minorTicks) == len(minor)
+    assert (np.abs(image - drawn("none")[2]).max(axis=2) > 24).sum() >= 2 * len(minor)  # the marks show
+    assert (np.abs(image - reference).max(axis=2) > 24).sum() <= 4  # and differ by anti-aliasing at most
 
 
 def test_short_log_axis_labels_1_2_5_and_draws_no_marks_between():
@@ -504,9 +522,28 @@ def test_short_log_axis_labels_1_2_5_and_draws_no_marks_between():
     plots._log_ticks(sparse, "x", 3, sparse=True)
     FigureCanvasAgg(fig).draw()
     np.testing.assert_allclose(dense.xaxis.get_majorticklocs(), [0.2, 0.5, 1.0, 2.0])
-    assert len(dense.xaxis.get_minorticklocs()) == 0 and not dense.xaxis.minorTicks[1:]
+    assert plots._MinorMarks.of(dense, "x") is None and not dense.xaxis.minorTicks[1:]
     assert [t.get_text() for t in dense.get_xticklabels()] == ["0.2", "0.5", "1", "2"]
-    assert len(sparse.xaxis.get_minorticklocs()) > 5
+    assert len(plots._MinorMarks.of(sparse, "x").positions()) > 5
+
+
+def test_shared_log_axes_each_draw_their_minor_marks():
+    """Axes sharing a log axis share its locators: each still gets its own minor marks."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 3))
+    axes = fig.subplots(1, 3, sharey=True)
+    for ax in axes:
+        ax.plot([1, 2], [0.07, 3.2])
+        ax.set_yscale("log")
+    for ax in axes:
+        plots._log_ticks(ax, "y")
+    FigureCanvasAgg(fig).draw()
+    positions = [plots._MinorMarks.of(ax, "y").positions() for ax in axes]
+    assert len(positions[0]) >= 10
+    for p in positions[1:]:
+        np.testing.assert_array_equal(p, positions[0])
 
 
 @pytest.mark.parametrize("name", ["ppc", "prior_posterior"])
@@ -526,7 +563,7 @@ def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name
     fig = func(fit)
     report._write_png(fig, tmp_path / "f.png")
     assert fig.get_layout_engine() is None
-    assert any(len(ax.xaxis.get_minorticklocs()) + len(ax.yaxis.get_minorticklocs()) for ax in fig.axes)
+    assert any(plots._MinorMarks.of(ax, w) is not None for ax in fig.axes for w in "xy")
     np.testing.assert_allclose([ax.get_position().bounds for ax in fig.axes],
                                [ax.get_position().bounds for ax in ref.axes], atol=1e-9)
     assert (tmp_path / "f.pdf").read_bytes()[:5] == b"%PDF-"
