@@ -374,6 +374,30 @@ def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path, mo
         gc.unfreeze()
 
 
+def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
+    """A figure worker runs without automatic garbage collection (report._init_worker): each
+    figure's artists, held in reference cycles, are collected once it is drawn, so a worker
+    drawing many figures does not pile them up."""
+    import gc
+
+    from matplotlib.figure import Figure
+
+    jobs = report.fit_figure_jobs(ea_fit, 0, "fit", tmp_path)
+    report._FITS, report._JOBS = [ea_fit], jobs
+    was_enabled = gc.isenabled()
+    gc.collect()
+    gc.disable()  # as in a worker
+    try:
+        for i in range(len(jobs)):
+            assert report._render_one(i) is None
+            assert not [o for o in gc.get_objects() if isinstance(o, Figure)]  # none left, even unreachable
+    finally:
+        report._FITS, report._JOBS = [], []
+        if was_enabled:
+            gc.enable()
+    assert all(job["path"].exists() for job in jobs)
+
+
 def test_table_names_break_at_their_underscores_and_stay_escaped(written):
     """A table cell gets a line-break opportunity after each underscore, so a narrow column
     breaks ``electroadhesion_coulomb`` between its words (the cell's text is unchanged for a
