@@ -174,7 +174,7 @@ class _MinorMarks(matplotlib.artist.Artist):
     at each draw at the positions ``locator`` gives in view, less those at a major tick: the
     marks matplotlib's minor ticks draw (marker, length, width, colour and direction from
     rcParams), without a Tick of five artists per mark made, placed and laid out at every draw
-    (a 21-panel predictive check had ~120: 17% of its drawing time, bench/results/report.md).
+    (a 21-panel predictive check had ~120: 13% of its drawing time, bench/results/report_commands.md).
     Left out of the layout: a mark is shorter than the major ticks beside it."""
 
     _MARKERS = {("x", "out"): matplotlib.lines.TICKDOWN, ("x", "in"): matplotlib.lines.TICKUP,

@@ -334,10 +334,9 @@ def _render_one(i):
     """Draw figure job ``i`` of :data:`_JOBS` into its PNG and PDF (top level: runs in a forked
     worker, which inherits the fits and jobs, so nothing is pickled but the index)."""
     job = _JOBS[i]
-    error = _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
-    if not gc.isenabled():  # a figure worker (_init_worker): the figure's garbage, collected once
-        gc.collect(1)
-    return error
+    if not gc.isenabled():  # a figure worker (_init_worker): the last figure's garbage, collected once
+        gc.collect(1)  # (before the next figure, not after: a worker's last figure is not worth it)
+    return _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
 
 
 @contextlib.contextmanager
@@ -359,9 +358,9 @@ def _frozen_heap():
 
 def _init_worker(parent):
     """A figure worker ends when the report process that forked it dies (even by SIGKILL). Its
-    garbage collector runs once after each figure (:func:`_render_one`) instead of on every
-    few thousand objects made, which a figure's artists triggered ~60 times each (2.5% of
-    the figures' time, bench/results/report.md)."""
+    garbage collector runs once per figure (:func:`_render_one`) instead of on every few
+    thousand objects made, which a figure's artists triggered ~60 times each (2.5% of the
+    figures' time, bench/results/report_commands.md)."""
     from .checkpoint import watch_parent  # not campaign's: that imports the fitting machinery
 
     watch_parent(parent)

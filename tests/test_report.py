@@ -376,13 +376,14 @@ def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path, mo
 
 def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
     """A figure worker runs without automatic garbage collection (report._init_worker): each
-    figure's artists, held in reference cycles, are collected once it is drawn, so a worker
-    drawing many figures does not pile them up."""
+    figure's artists, held in reference cycles, are collected when the next figure starts, so
+    a worker drawing many figures holds at most the last one."""
     import gc
 
     from matplotlib.figure import Figure
 
     jobs = report.fit_figure_jobs(ea_fit, 0, "fit", tmp_path)
+    assert len(jobs) >= 3
     report._FITS, report._JOBS = [ea_fit], jobs
     was_enabled = gc.isenabled()
     gc.collect()
@@ -390,7 +391,7 @@ def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
     try:
         for i in range(len(jobs)):
             assert report._render_one(i) is None
-            assert not [o for o in gc.get_objects() if isinstance(o, Figure)]  # none left, even unreachable
+            assert len([o for o in gc.get_objects() if isinstance(o, Figure)]) == 1  # even unreachable ones count
     finally:
         report._FITS, report._JOBS = [], []
         if was_enabled:
