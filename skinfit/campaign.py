@@ -45,7 +45,8 @@ holds this group of these data (hash), model card and priors (hashes) and seed, 
 :func:`skinfit.sampling.sampler_settings`); a saved fit that does not is reported ("stale")
 and fitted again.  A restarted campaign (after a crash or a kill) skips complete fits and runs
 only the others; temporary files of writers that died are removed first.  One campaign at a
-time may write to an ``out`` (a second gets ``OUT: is in use by pid N``).  ``out/index.csv`` and
+time may write to an ``out`` (a second gets ``OUT: is in use by pid N``), and none into an ``out``
+whose results it would drop from their index (:func:`check_campaign_out`).  ``out/index.csv`` and
 ``out/index.json`` list every fit (status, seconds, converged, worker, peak memory), rewritten
 after each result; ``out/campaign.log`` records what each run started, skipped and finished.
 
@@ -337,8 +338,41 @@ def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
         return _run_locked(campaign, scheduler, workers, echo)
 
 
+def check_campaign_out(campaign):
+    """Refuse, before anything is run or written, a campaign's ``out`` folder whose results
+    this campaign would drop from their index: a single fit (``fit.nc``) or a run by groups
+    of ``skinfit fit`` (whose ``index.json`` the campaign's would replace), an ``index.json``
+    skinfit cannot read, or another campaign's index listing fits whose files are there but
+    which this campaign does not list (they would be left on disk, no longer indexed). The
+    same campaign, edited or extended, may run in its folder again."""
+    out = campaign.out
+    if (out / "fit.nc").exists():
+        raise InputError(out, "holds a single fit (fit.nc): give the campaign another out (nothing was written)")
+    index = out / "index.json"
+    if not index.exists():
+        return
+    try:
+        rows = json.loads(index.read_text(encoding="utf-8"))
+        listed = [str(row["path"]) for row in rows] if isinstance(rows, list) else None
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(index, "not a campaign's index skinfit can read: give the campaign another out, or remove "
+                                "it to run here (nothing was written)") from None
+    if listed is None:
+        raise InputError(out, f"holds a run by groups of {rows.get('model', '?')} (index.json of skinfit fit --by): "
+                              "give the campaign another out (nothing was written)")
+    root = out.resolve()
+    mine = {Path(task["path"]).resolve() for task in campaign.tasks}
+    dropped = [p for p in listed if (out / p).resolve() not in mine and (out / p).resolve().is_relative_to(root)
+               and (out / p).is_file()]
+    if dropped:
+        raise InputError(out, f"holds {len(dropped)} fit(s) of another campaign that {Path(campaign.path).name} "
+                              f"does not list (e.g. {dropped[0]}): they would drop out of the index; give the "
+                              "campaign another out, or list them in it, or remove them (nothing was written)")
+
+
 def _run_locked(campaign, scheduler, workers, echo):
     out = campaign.out
+    check_campaign_out(campaign)
     stale = remove_stale_temps(out)
     log = open(out / "campaign.log", "a", buffering=1)
     for p in stale:

@@ -313,13 +313,17 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
     """Refuse, before anything is fitted or written, an output folder that holds results of
     other inputs: a single fit (``fit.nc``) or a run by groups (``index.json``, ``by`` the
     grouping columns) made from another model card, prior file or dataset (their sha256 as
-    recorded; a model id where no sha256 was), or grouped otherwise, or the other kind of run.
-    Results of the same inputs (a rerun: another seed or sampler setting) may be replaced.
+    recorded; a model id where no sha256 was), or grouped otherwise, or the other kind of run,
+    or a campaign's results (its index.json a list of rows). Results of the same inputs (a
+    rerun: another seed or sampler setting) may be replaced.
     ``model``, ``priors``, ``dataset``: the Model, PriorSet and Dataset about to be fitted."""
     out_dir = Path(out_dir)
     single, index = out_dir / "fit.nc", out_dir / "index.json"
     mine, other, held, this = ((single, index, "a run by groups (index.json)", "a single fit") if by is None else
                                (index, single, "a single fit (fit.nc)", "the run by groups"))
+    if index.exists() and _is_campaign_index(index):  # neither kind of run of skinfit fit
+        raise InputError(out_dir, f"holds a campaign's results (index.json of skinfit campaign): give {this} "
+                                  "another --out (nothing was written)")
     if other.exists():
         raise InputError(out_dir, f"holds {held}: give {this} another --out (nothing was written)")
     if not mine.exists():
@@ -346,6 +350,15 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
         raise InputError(out_dir, f"holds {what}, made from {_inputs_text(differ)} than this fit of {model.id} on "
                                   f"{dataset.id}: give another --out, or remove its results to replace them "
                                   f"(nothing was written)")
+
+
+def _is_campaign_index(index):
+    """True when ``index`` is a campaign's index.json (a list of rows, see
+    :mod:`skinfit.campaign`), not a run by groups' (an object)."""
+    try:
+        return isinstance(json.loads(index.read_text(encoding="utf-8")), list)
+    except (OSError, ValueError):
+        return False
 
 
 def _inputs_text(keys):

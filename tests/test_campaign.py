@@ -319,6 +319,58 @@ def test_class2_a_campaign_refuses_an_out_in_use(tmp_path):
     assert not (tmp_path / "busy" / "index.json").exists()
 
 
+def test_class1_a_campaign_never_drops_results_from_their_index(local_run, tmp_path, capsys):
+    """A campaign refuses, with one line and not a byte changed, an out whose results it would
+    drop from their index: another campaign's fits it does not list, a run by groups of
+    `skinfit fit --by` (whose index.json it would replace), a single fit; the same campaign,
+    or one extending it, may run there. `skinfit fit --out` refuses a campaign's folder too."""
+    import json
+
+    from skinfit.campaign import check_campaign_out
+
+    folder, data, _, _ = local_run
+    out = folder / "local"
+    listed = [row["path"] for row in json.loads((out / "index.json").read_text())]
+
+    def campaign(name, models, into):
+        text = _campaign(tmp_path, data, name).read_text()
+        text = text.replace('models = ["electroadhesion_coulomb"]', f"models = {json.dumps(models)}")
+        (tmp_path / f"{name}.toml").write_text(text.replace(f'out = "{name}"', f'out = "{into}"'))
+        return tmp_path / f"{name}.toml"
+
+    def refused(argv, where, message):
+        files = {p: p.read_bytes() for p in where.rglob("*") if p.is_file()}
+        capsys.readouterr()
+        assert main(argv) == 2
+        assert capsys.readouterr().err.strip() == f"skinfit: error: {where}: {message}"
+        assert {p: p.read_bytes() for p in where.rglob("*") if p.is_file()} == files
+
+    refused(["campaign", str(campaign("other", ["electroadhesion_empirical"], out))], out,
+            f"holds 3 fit(s) of another campaign that other.toml does not list (e.g. {listed[0]}): they would drop "
+            "out of the index; give the campaign another out, or list them in it, or remove them (nothing was written)")
+    for models in (["electroadhesion_coulomb"], ["electroadhesion_coulomb", "electroadhesion_empirical"]):
+        check_campaign_out(load_campaign(campaign("more", models, out)))  # itself, or extended: no objection
+    quick = ["--ess", "50", "--max-steps", "300", "--quiet"]
+    refused(["fit", "electroadhesion_coulomb", str(data), "--by", "subject", "--out", str(out), *quick], out,
+            "holds a campaign's results (index.json of skinfit campaign): give the run by groups another --out "
+            "(nothing was written)")
+    refused(["fit", "electroadhesion_coulomb", str(data), "--out", str(out), *quick], out,
+            "holds a campaign's results (index.json of skinfit campaign): give a single fit another --out "
+            "(nothing was written)")
+
+    run, single = tmp_path / "run", tmp_path / "single"
+    run.mkdir()
+    (run / "index.json").write_text(json.dumps({"model": "electroadhesion_coulomb", "by": ["subject"],
+                                                "dataset_sha256": "0" * 64, "fits": []}))
+    refused(["campaign", str(campaign("into_run", ["electroadhesion_coulomb"], run))], run,
+            "holds a run by groups of electroadhesion_coulomb (index.json of skinfit fit --by): give the campaign "
+            "another out (nothing was written)")
+    single.mkdir()
+    (single / "fit.nc").write_bytes(b"a fit")
+    refused(["campaign", str(campaign("into_single", ["electroadhesion_coulomb"], single))], single,
+            "holds a single fit (fit.nc): give the campaign another out (nothing was written)")
+
+
 def test_class4_ids_with_path_syntax_are_refused_before_any_write(tmp_path):
     data, _ = write_population(tmp_path / "d", n_subjects=1)
     card = data / "dataset.toml"
