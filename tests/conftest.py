@@ -40,3 +40,20 @@ def _figure_store(tmp_path_factory):
         os.environ.pop("SKINFIT_FIGURE_STORE", None)
     else:
         os.environ["SKINFIT_FIGURE_STORE"] = old
+
+
+@pytest.fixture
+def refused(capsys):
+    """``refused(argv, where, message)``: the CLI run on ``argv`` exits 2 with exactly the one
+    line ``skinfit: error: WHERE: MESSAGE`` on stderr, and not a byte of a file under ``where``
+    changed (nor a file added or removed)."""
+    from skinfit.cli import main
+
+    def check(argv, where, message):
+        files = {p: p.read_bytes() for p in where.rglob("*") if p.is_file()}
+        capsys.readouterr()
+        assert main(argv) == 2
+        assert capsys.readouterr().err.strip() == f"skinfit: error: {where}: {message}"
+        assert {p: p.read_bytes() for p in where.rglob("*") if p.is_file()} == files
+
+    return check

@@ -319,7 +319,7 @@ def test_class2_a_campaign_refuses_an_out_in_use(tmp_path):
     assert not (tmp_path / "busy" / "index.json").exists()
 
 
-def test_class1_a_campaign_never_drops_results_from_their_index(local_run, tmp_path, capsys):
+def test_class1_a_campaign_never_drops_results_from_their_index(local_run, tmp_path, refused):
     """A campaign refuses, with one line and not a byte changed, an out whose results it would
     drop from their index: another campaign's fits it does not list, a run by groups of
     `skinfit fit --by` (whose index.json it would replace), a single fit; the same campaign,
@@ -337,13 +337,6 @@ def test_class1_a_campaign_never_drops_results_from_their_index(local_run, tmp_p
         text = text.replace('models = ["electroadhesion_coulomb"]', f"models = {json.dumps(models)}")
         (tmp_path / f"{name}.toml").write_text(text.replace(f'out = "{name}"', f'out = "{into}"'))
         return tmp_path / f"{name}.toml"
-
-    def refused(argv, where, message):
-        files = {p: p.read_bytes() for p in where.rglob("*") if p.is_file()}
-        capsys.readouterr()
-        assert main(argv) == 2
-        assert capsys.readouterr().err.strip() == f"skinfit: error: {where}: {message}"
-        assert {p: p.read_bytes() for p in where.rglob("*") if p.is_file()} == files
 
     refused(["campaign", str(campaign("other", ["electroadhesion_empirical"], out))], out,
             f"holds 3 fit(s) of another campaign that other.toml does not list (e.g. {listed[0]}): they would drop "

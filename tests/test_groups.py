@@ -199,7 +199,7 @@ def test_class1_report_check_names_fits_whose_data_changed(odd_run):
     assert len(messages) == 3 and all("which now has" in m and "not of the current data" in m for m in messages)
 
 
-def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_path, capsys):
+def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_path, refused):
     """`skinfit fit --out DIR`: a fit or a run by groups there made from another model, prior
     file or data, or grouped otherwise, or the other kind of run, is refused with one line and
     not a byte of it changed; the same inputs (a rerun, another seed) replace it."""
@@ -210,47 +210,43 @@ def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_pa
     quick = ["--ess", "50", "--max-steps", "300", "--quiet"]
     single, run = tmp_path / "single", tmp_path / "run"
 
-    def refused(argv, out, holds):
-        files = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-        capsys.readouterr()
-        assert main(argv) == 2
-        assert capsys.readouterr().err.strip() == f"skinfit: error: {out}: holds {holds}"
-        assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
+    def holds(argv, out, what):
+        refused(argv, out, f"holds {what}")
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
         assert main(["fit", "electroadhesion_coulomb", str(path), "--out", str(single), "--seed", "1", *quick]) == 0
         after = ("than this fit of {} on population: give another --out, or remove its results to replace them "
                  "(nothing was written)")
-        refused(["fit", "electroadhesion", str(path), "--out", str(single), *quick], single,
+        holds(["fit", "electroadhesion", str(path), "--out", str(single), *quick], single,
                 "a fit of electroadhesion_coulomb on population, made from another model " + after.format("electroadhesion"))
-        refused(["fit", "electroadhesion_coulomb", str(other), "--out", str(single), *quick], single,
+        holds(["fit", "electroadhesion_coulomb", str(other), "--out", str(single), *quick], single,
                 "a fit of electroadhesion_coulomb on population, made from other data "
                 + after.format("electroadhesion_coulomb"))
-        refused(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(single), *quick], single,
+        holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(single), *quick], single,
                 "a single fit (fit.nc): give the run by groups another --out (nothing was written)")
         assert main(["fit", "electroadhesion_coulomb", str(path), "--out", str(single), "--seed", "2", *quick]) == 0
         assert int(load_fit(single / "fit.nc").attrs["seed"]) == 2  # a rerun replaces the fit
 
         assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), *quick]) == 0
-        refused(["fit", "electroadhesion", str(path), "--by", "subject", "--out", str(run), *quick], run,
+        holds(["fit", "electroadhesion", str(path), "--by", "subject", "--out", str(run), *quick], run,
                 "a run of electroadhesion_coulomb by subject, made from another model "
                 + after.format("electroadhesion"))
         from skinfit.priors import load_priors
 
         (tmp_path / "priors.toml").write_text(load_priors("electroadhesion_coulomb").text + "\n# edited\n")
-        refused(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--priors",
+        holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--priors",
                  str(tmp_path / "priors.toml"), "--out", str(run), *quick], run,
                 "a run of electroadhesion_coulomb by subject, made from another prior file "
                 + after.format("electroadhesion_coulomb"))
-        refused(["fit", "electroadhesion_coulomb", str(path), "--by", "voltage", "--out", str(run), *quick], run,
+        holds(["fit", "electroadhesion_coulomb", str(path), "--by", "voltage", "--out", str(run), *quick], run,
                 "a run of electroadhesion_coulomb by subject, made from another grouping "
                 + after.format("electroadhesion_coulomb"))
-        refused(["fit", "electroadhesion_coulomb", str(path), "--out", str(run), *quick], run,
+        holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(run), *quick], run,
                 "a run by groups (index.json): give a single fit another --out (nothing was written)")
         assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), *quick]) == 0
         damaged = tmp_path / "damaged"
         damaged.mkdir()
         (damaged / "fit.nc").write_bytes(b"not a netCDF file")
-        refused(["fit", "electroadhesion_coulomb", str(path), "--out", str(damaged), *quick], damaged,
+        holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(damaged), *quick], damaged,
                 "a fit.nc that skinfit cannot read: give another --out, or remove it to fit here (nothing was written)")
