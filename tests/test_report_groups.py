@@ -95,6 +95,29 @@ def test_population_band_is_where_94_percent_of_subjects_lie():
     assert band["lo"] == pytest.approx(lo, rel=1e-3) and band["hi"] == pytest.approx(hi, rel=1e-3)
 
 
+def test_a_report_section_computes_the_population_summary_once():
+    """The hyper-parameters' summary (with R-hat and ESS of each, ~50 ms) is read per parameter
+    by the report: computed once per section, each parameter's band still its own."""
+    from skinfit.report_groups import population_section
+
+    class Result:
+        parameters, subjects, calls = ["E", "F", "G"], ["S01"], 0
+
+        def summary(self):
+            Result.calls += 1
+            return pd.DataFrame([{"parameter": p, "quantity": q, "estimate": v, "lower": 0.0, "upper": 0.0,
+                                  "coordinate": "log"}
+                                 for p, mu in zip(self.parameters, (1e3, 2e4, 3e5))
+                                 for q, v in (("mu", np.log(mu)), ("tau", 0.5))])
+
+        def subject_summary(self):
+            return pd.DataFrame([{"parameter": p, "subject": "S01", "estimate": 1.0} for p in self.parameters])
+
+    section = population_section(Result())
+    assert Result.calls == 1
+    assert [section["intervals"][p]["median"] for p in "EFG"] == pytest.approx([1e3, 2e4, 3e5])
+
+
 def _by_run(fits, folder):
     """``fits`` {subject: Fit} saved as a ``skinfit fit --by subject`` run directory."""
     folder.mkdir(parents=True)
