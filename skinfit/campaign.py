@@ -80,8 +80,8 @@ from .checkpoint import CheckpointLock, remove_stale_temps, replace_atomic, watc
 from .data import load_dataset
 from .errors import ConvergenceWarning, InputError
 from .fit import fit
-from .groups import (_write_json, check_name, derive_seed, group_dir, group_labels, inside, record_source,
-                     source_problem)
+from .groups import (_write_json, check_name, derive_seed, group_dir, group_labels, index_document, inside,
+                     record_source, source_problem)
 from .models import NOISE_MODELS, load_model
 from .priors import load_priors
 from .sampling import sampler_settings
@@ -352,9 +352,9 @@ def check_campaign_out(campaign):
     if not index.exists():
         return
     try:
-        rows = json.loads(index.read_text(encoding="utf-8"))
-        listed = [str(row["path"]) for row in rows] if isinstance(rows, list) else None
-    except (OSError, ValueError, KeyError, TypeError):
+        kind, rows = index_document(index)
+        listed = [str(row["path"]) for row in rows] if kind == "campaign" else None
+    except (InputError, KeyError, TypeError):
         raise InputError(index, "not a campaign's index skinfit can read: give the campaign another out, or remove "
                                 "it to run here (nothing was written)") from None
     if listed is None:
@@ -362,8 +362,8 @@ def check_campaign_out(campaign):
                               "give the campaign another out (nothing was written)")
     root = out.resolve()
     mine = {Path(task["path"]).resolve() for task in campaign.tasks}
-    dropped = [p for p in listed if (out / p).resolve() not in mine and (out / p).resolve().is_relative_to(root)
-               and (out / p).is_file()]
+    dropped = [p for p in listed if (target := (out / p).resolve()) not in mine and target.is_relative_to(root)
+               and target.is_file()]
     if dropped:
         raise InputError(out, f"holds {len(dropped)} fit(s) of another campaign that {Path(campaign.path).name} "
                               f"does not list (e.g. {dropped[0]}): they would drop out of the index; give the "

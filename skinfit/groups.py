@@ -38,7 +38,7 @@ from .fit import fit, load_fit
 from .models import Model, load_model
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
-           "read_index",
+           "read_index", "index_document",
            "record_source", "source_problem", "data_drift"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
@@ -200,6 +200,23 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     return pd.DataFrame(rows)
 
 
+_INDEX_KINDS = "expected a `fit --by` index (with 'groups') or a campaign index (a list)"
+
+
+def index_document(index):
+    """An index.json read, with its kind: ``("by", dict)`` for a ``skinfit fit --by`` run's,
+    ``("campaign", list of rows)`` for a campaign's; InputError when it is not JSON or neither."""
+    try:
+        doc = json.loads(Path(index).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise InputError(index, f"not readable as JSON ({exc})") from None
+    if isinstance(doc, list):
+        return "campaign", doc
+    if isinstance(doc, dict):
+        return "by", doc
+    raise InputError(index, _INDEX_KINDS)
+
+
 def read_index(path):
     """The completed fits a run's index.json lists, for readers of either kind of run: a
     ``skinfit fit --by`` run (a dict with ``groups``) or a campaign (a list of rows, of which
@@ -212,17 +229,14 @@ def read_index(path):
     index = path / "index.json" if path.is_dir() else path
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json of `skinfit fit --by` or of a campaign)")
-    try:
-        doc = json.loads(index.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise InputError(index, f"not readable as JSON ({exc})") from None
-    if isinstance(doc, dict) and isinstance(doc.get("groups"), list):
+    kind, doc = index_document(index)
+    if kind == "campaign":
+        listed = [r for r in doc if not isinstance(r, dict) or r.get("status", "done") in ("done", "complete")]
+    elif isinstance(doc.get("groups"), list):
         listed = [dict(g, model=doc.get("model"), dataset=doc.get("dataset")) if isinstance(g, dict) else g
                   for g in doc["groups"]]
-    elif isinstance(doc, list):
-        listed = [r for r in doc if not isinstance(r, dict) or r.get("status", "done") in ("done", "complete")]
     else:
-        raise InputError(index, "expected a `fit --by` index (with 'groups') or a campaign index (a list)")
+        raise InputError(index, _INDEX_KINDS)
     rows = []
     for i, r in enumerate(listed, start=1):
         if not isinstance(r, dict) or not isinstance(r.get("path"), str):
@@ -336,7 +350,7 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
             old = {k: str(attrs[k]) for k in new if k in attrs}
             what = f"a fit of {attrs['model_id']} on {attrs.get('dataset_id', '?')}"
         else:
-            doc = json.loads(index.read_text(encoding="utf-8"))
+            doc = index_document(index)[1]
             old = {"model_id": doc["model"], "dataset_sha256": doc["dataset_sha256"], "by": doc["by"],
                    **{k: doc[k] for k in ("model_sha256", "priors_sha256") if k in doc}}
             new["by"] = list(by)
@@ -353,11 +367,10 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
 
 
 def _is_campaign_index(index):
-    """True when ``index`` is a campaign's index.json (a list of rows, see
-    :mod:`skinfit.campaign`), not a run by groups' (an object)."""
+    """True when ``index`` is a campaign's index.json (:func:`index_document`)."""
     try:
-        return isinstance(json.loads(index.read_text(encoding="utf-8")), list)
-    except (OSError, ValueError):
+        return index_document(index)[0] == "campaign"
+    except InputError:
         return False
 
 

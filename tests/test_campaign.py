@@ -362,6 +362,11 @@ def test_class1_a_campaign_never_drops_results_from_their_index(local_run, tmp_p
     (single / "fit.nc").write_bytes(b"a fit")
     refused(["campaign", str(campaign("into_single", ["electroadhesion_coulomb"], single))], single,
             "holds a single fit (fit.nc): give the campaign another out (nothing was written)")
+    odd = tmp_path / "odd"
+    odd.mkdir()
+    (odd / "index.json").write_text("3")  # JSON, but neither kind of index
+    with pytest.raises(skinfit.InputError, match="not a campaign's index skinfit can read"):
+        check_campaign_out(load_campaign(campaign("into_odd", ["electroadhesion_coulomb"], odd)))
 
 
 def test_class4_ids_with_path_syntax_are_refused_before_any_write(tmp_path):
