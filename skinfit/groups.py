@@ -34,7 +34,7 @@ import pandas as pd
 
 from .data import Dataset, load_dataset
 from .errors import InputError
-from .fit import fit, load_fit
+from .fit import fit, load_fit, resolve_inputs
 from .models import Model, load_model
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
@@ -164,12 +164,10 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     """
     from .checkpoint import CheckpointLock, remove_stale_temps
 
-    from .priors import PriorSet, load_priors
-
     model = model if isinstance(model, Model) else load_model(model)
     from_file = not isinstance(dataset, Dataset)  # else it may be a subset: its hash is not the file's
     dataset = load_dataset(dataset) if from_file else dataset
-    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    model, dataset, priors = resolve_inputs(model, dataset, priors)
     by = [by] if isinstance(by, str) else list(by)
     check_out_dir(out_dir, model, priors, dataset, by)
     labels, levels = group_labels(dataset, by)
