@@ -186,6 +186,8 @@ class _MinorMarks(matplotlib.artist.Artist):
         rc = matplotlib.rcParams
         direction = rc[f"{which}tick.direction"]
         self.which, self.locator = which, locator
+        self._in_view = _InView(locator)
+        self._in_view.set_axis(ax.xaxis if which == "x" else ax.yaxis)
         self._line = Line2D([], [], linestyle="none", marker=self._MARKERS[which, direction],
                             markersize=rc[f"{which}tick.minor.size"] * (2 if direction == "inout" else 1),
                             markeredgewidth=rc[f"{which}tick.minor.width"], color=rc[f"{which}tick.color"],
@@ -202,18 +204,14 @@ class _MinorMarks(matplotlib.artist.Artist):
         return next((a for a in ax.artists if isinstance(a, cls) and a.which == which), None)
 
     def positions(self):
-        """The marks' positions in data units: in view, none at a major tick (as
-        :meth:`matplotlib.axis.Axis.get_minorticklocs` and ``_update_ticks`` keep them)."""
+        """The marks' positions in data units: in view (:class:`_InView`), none at a major tick
+        (as :meth:`matplotlib.axis.Axis.get_minorticklocs` drops them)."""
         axis = self.axes.xaxis if self.which == "x" else self.axes.yaxis
-        lo, hi = sorted(axis.get_view_interval())
-        locs = np.asarray(self.locator.tick_values(lo, hi), dtype=float)
+        locs = np.asarray(self._in_view(), dtype=float)
         transform = axis.get_transform()
-        t_lo, t_hi = transform.transform([lo, hi])
+        t_lo, t_hi = sorted(transform.transform(axis.get_view_interval()))
         t_locs, t_major = transform.transform(locs), transform.transform(np.asarray(axis.get_majorticklocs()))
-        slack = 1e-10 * (t_hi - t_lo)
-        keep = (t_locs >= t_lo - slack) & (t_locs <= t_hi + slack)
-        keep &= ~np.isclose(t_locs[:, None], t_major[None, :], atol=(t_hi - t_lo) * 1e-5, rtol=0).any(axis=1)
-        return locs[keep]
+        return locs[~np.isclose(t_locs[:, None], t_major[None, :], atol=(t_hi - t_lo) * 1e-5, rtol=0).any(axis=1)]
 
     def draw(self, renderer):
         if not self.get_visible():
