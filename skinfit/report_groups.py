@@ -164,10 +164,9 @@ def hyperprior_table(hyperpriors):
              "from": "derived from"}
     entries = {name: h for name, h in hyperpriors.items() if isinstance(h, dict)}
     extra = list(dict.fromkeys(k for h in entries.values() for k in h if k not in named))  # nu: Student-t only
-    frame = pd.DataFrame([{**{shown: h.get(key, "") for key, shown in named.items()},
-                           **{k: h.get(k, "") for k in extra}} for h in entries.values()],
-                         index=pd.Index(list(entries), name="parameter"))
-    return frame
+    return pd.DataFrame([{**{shown: h.get(key, "") for key, shown in named.items()},
+                          **{k: h.get(k, "") for k in extra}} for h in entries.values()],
+                        index=pd.Index(list(entries), name="parameter"))
 
 
 def _range(values):
