@@ -430,6 +430,8 @@ def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path,
     assert {p.name: p.read_bytes() for p in mine.iterdir()} == files
     (tmp_path / "a_file").write_text("x")
     assert main(["report", str(run), "--out", str(tmp_path / "a_file")]) != 0
+    assert capsys.readouterr().err.strip() == (f"skinfit: error: {tmp_path / 'a_file'}: is a file: --out names the "
+                                               "folder the report is written into")
     assert (tmp_path / "a_file").read_text() == "x"
 
     new = tmp_path / "new"
@@ -489,7 +491,8 @@ def test_a_report_of_a_run_reports_the_fits_its_index_lists(ea_fit, tmp_path, no
     (run / "index.json").write_text(json.dumps([{"status": "complete", "path": "a/fit.nc"},
                                                 {"status": "failed: ValueError: x", "path": "b/fit.nc"}]))
     assert main(["report", str(run), "--out", str(tmp_path / "r"), "--json"]) == 0
-    assert "1 fit(s) of" in capsys.readouterr().err
+    assert (f"skinfit report: 1 fit(s) of {run / 'index.json'} not complete (failed or pending): not reported"
+            in capsys.readouterr().err)
     (run / "index.json").write_text(json.dumps({"groups": [{"group": "g=a", "path": "gone/fit.nc"}]}))
     assert main(["report", str(run), "--out", str(tmp_path / "r")]) == 2
     assert "lists gone/fit.nc, which does not exist" in capsys.readouterr().err
