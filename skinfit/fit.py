@@ -909,7 +909,7 @@ def load_fit(path: str | os.PathLike) -> Fit:
         stored = _StoredGroups(path)
         tree = stored.read_light()
     except (OSError, ValueError, KeyError) as exc:
-        raise InputError(path, f"not a readable skinfit result ({exc})") from None
+        raise InputError(path, f"not a readable skinfit result ({' '.join(str(exc).split())})") from None  # one line
     if "model_id" not in tree.attrs:
         raise InputError(path, "not a skinfit result (no model_id attribute)")
     return Fit(tree, stored=stored if stored.names else None)
@@ -933,6 +933,15 @@ class _StoredGroups:
         """The tree without the groups of :data:`DEFERRED` (listed in ``names``)."""
         import h5netcdf
 
+        from ._netcdf import NotPlain, read_groups
+
+        try:  # the layout Fit.save writes, read directly; any other by h5netcdf below
+            order, attrs, nodes = read_groups(self.path, lambda g: g not in DEFERRED)
+        except NotPlain:
+            pass
+        else:
+            self.order, self.names = order, [g for g in order if g in DEFERRED]
+            return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
         with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
             order = list(h.groups)  # names only: a group's metadata is read when it is opened
             light = {g: h.groups[g] for g in order if g not in DEFERRED}
@@ -954,15 +963,26 @@ class _StoredGroups:
         if not same:
             raise InputError(self.path, "changed or removed since the fit was loaded: load it again "
                                         "(its pointwise log-likelihood and predictive draws are read on first use)")
+        from ._netcdf import NotPlain, read_groups
+
+        try:
+            extra = read_groups(self.path, lambda g: g in self.names)[2]
+        except NotPlain:
+            extra = self._read_h5netcdf()
+        nodes = {n: tree[n].to_dataset(inherit=False) for n in tree.children} | extra
+        order = [g for g in self.order if g in nodes] + [g for g in nodes if g not in self.order]
+        return xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)} | {n: nodes[n] for n in order})
+
+    def _read_h5netcdf(self):
+        """The groups of ``names`` read by h5netcdf (a file of another layout than Fit.save's)."""
+        import h5netcdf
+
         with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
             groups = {g: h.groups[g] for g in self.names}
             if any(group.groups for group in groups.values()):
                 raise InputError(self.path, f"groups inside {', '.join(g for g in groups if groups[g].groups)}: "
                                             "not a fit file skinfit writes")
-            extra = {g: _decoded(group) for g, group in groups.items()}
-        nodes = {n: tree[n].to_dataset(inherit=False) for n in tree.children} | extra
-        order = [g for g in self.order if g in nodes] + [g for g in nodes if g not in self.order]
-        return xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)} | {n: nodes[n] for n in order})
+            return {g: _decoded(group) for g, group in groups.items()}
 
 
 def _decoded(group):
