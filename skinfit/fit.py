@@ -902,7 +902,7 @@ def load_fit(path: str | os.PathLike) -> Fit:
     from the same file: if it has been replaced or changed meanwhile, that read raises
     InputError rather than mix two results.  Groups are read with h5py directly
     (:mod:`skinfit._netcdf`) and decoded by xarray's CF decoding: the same tree as
-    ``xarray.open_datatree``, in ~25% of its time. A file of another layout is read by
+    ``xarray.open_datatree``, in under half of its time. A file of another layout is read by
     h5netcdf (groups of variables) or ``xarray.open_datatree`` whole (nested groups, variables
     at the root)."""
     path = fit_file(path)
