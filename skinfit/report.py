@@ -445,10 +445,26 @@ def render_figures(fits, jobs, figdir, workers=None):
     for i in [*todo, *fetched]:
         if errors[i] is None:
             manifest[jobs[i]["path"].name] = keys[i]
-        else:
+        else:  # not the figure an earlier report drew there, nor a part of this one's
             manifest.pop(jobs[i]["path"].name, None)
+            _remove_figure(figdir, jobs[i]["path"].name)
+    shown = {job["path"].name for job in jobs}
+    for name in [n for n in manifest if n not in shown]:  # an earlier report's, not shown by this one
+        manifest.pop(name)
+        _remove_figure(figdir, name)
     _write_manifest(figdir, manifest)
     return errors
+
+
+def _remove_figure(figdir, name):
+    """Remove figure ``name`` (a PNG file name, as the manifest records it) and its PDF from
+    ``figdir``: figures/ holds only the figures its page shows, so none of an earlier report
+    (a fit no longer reported, a figure that could not be drawn this time) is taken for one of
+    this report. A name that is not a plain PNG file name (a damaged manifest) removes nothing."""
+    if not isinstance(name, str) or name != Path(name).name or not name.endswith(".png") or name.startswith("."):
+        return
+    for suffix in (".png", ".pdf"):
+        (figdir / name).with_suffix(suffix).unlink(missing_ok=True)
 
 
 def _in_folder(manifest, path, key):
@@ -755,7 +771,8 @@ def _record_outputs(out, before, start):
     """Write :data:`REPORT_MARKER`: the folder is a report's, and the top-level files this report
     wrote (new since ``before``, or changed since ``start`` ns), which the next report into it
     removes before writing its own: a table of a fit no longer reported never stays beside the
-    new page. Figures stay (reused by content, see :func:`render_figures`)."""
+    new page. Figures are kept by :func:`render_figures`: reused by content, removed when the
+    new page does not show them."""
     files = []
     if before is not None:
         files = sorted(p.name for p in out.iterdir() if p.is_file() and not p.name.startswith(".")

@@ -155,6 +155,44 @@ def test_a_comparison_chart_is_kept_only_while_its_table_is_unchanged(written, e
         {k: v for k, v in manifest.items() if k != "comparison.png"}
 
 
+def test_figures_holds_only_the_figures_its_page_shows(written, ea_fit, monkeypatch, tmp_path):
+    """A report into the folder of a report of more fits removes the figures of the fits it no
+    longer shows (and the comparison chart it no longer draws), keeps those it shows without
+    drawing them again, and never touches a file its manifest does not list or a name outside
+    the folder; a figure that fails is removed, never left from the earlier report."""
+    import shutil
+
+    index, _ = written
+    out = tmp_path / "again"
+    shutil.copytree(index.parent, out)
+    figdir = out / "figures"
+    before = {p.name: p.stat().st_mtime_ns for p in figdir.iterdir() if not p.name.startswith(".")}
+    ours = {n for n in before if n.startswith("electroadhesion__")}
+    gone = set(before) - ours
+    assert any("electroadhesion_coulomb" in n for n in gone) and {"comparison.png", "comparison.pdf"} <= gone
+    (figdir / "mine.png").write_bytes(b"the user's own")
+    (tmp_path / "outside.png").write_bytes(b"not the report's")
+    manifest = json.loads((figdir / ".figures.json").read_text())
+    manifest["../outside.png"] = manifest["mine.png.png"] = "damaged"
+    (figdir / ".figures.json").write_text(json.dumps(manifest))
+    report.write_report([ea_fit], out, title="one fit")
+    left = {p.name: p.stat().st_mtime_ns for p in figdir.iterdir() if not p.name.startswith(".")}
+    assert left == {n: before[n] for n in ours} | {"mine.png": left["mine.png"]}
+    assert set(json.loads((figdir / ".figures.json").read_text())) == {n for n in ours if n.endswith(".png")}
+    assert (tmp_path / "outside.png").read_bytes() == b"not the report's"
+    page = (out / "index.html").read_text()
+    assert all(f"figures/{n}" in page for n in ours) and "figures/mine.png" not in page
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no trace today")
+
+    monkeypatch.setattr(report.plots, "plot_trace", broken)
+    report.write_report([ea_fit], out, title="one fit")
+    trace = "electroadhesion__electroadhesion_synthetic_trace"
+    assert not (figdir / f"{trace}.png").exists() and not (figdir / f"{trace}.pdf").exists()
+    assert f"figure {trace}.png could not be drawn (RuntimeError: no trace today)" in (out / "index.html").read_text()
+
+
 def test_failures_are_at_the_top(written, rival):
     index, _ = written
     page = _parse(index)
