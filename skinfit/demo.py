@@ -195,11 +195,14 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
                 drawing.append(pool.submit(_draw_one, path, n_of_model[p["model"]]))
         fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
                 f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
-        comparisons, populations, contrasts = _analyses(fits, plan, out, seed, echo)
         for fut in drawing:  # a figure not drawn here (even a lost worker) is drawn by the report
             fut.exception()
-    index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets",
-                         comparison=comparisons or None, populations=populations, contrasts=contrasts)
+
+    def analyses():  # while the report draws the figures the store does not hold
+        comparisons, populations, contrasts = _analyses(fits, plan, out, seed, echo)
+        return {"comparison": comparisons or None, "populations": populations, "contrasts": contrasts}
+
+    index = write_report(fits, report, title="skinfit demo: the shipped (simulated) datasets", analyses=analyses)
     (Path(report) / "demo_plan.json").write_text(json.dumps(plan, indent=1) + "\n")
     echo(f"\nreport: {index}")
     return index

@@ -367,7 +367,7 @@ def _init_worker(parent):
     gc.disable()
 
 
-def render_figures(fits, jobs, figdir, workers=None):
+def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
     """Draw figure ``jobs`` ({fit: index into fits, or {label: index} for a figure across fits,
     or None for one drawn from its args alone, whose content ``inputs`` then names (a sha256);
     func: plots function name; args; optional kwargs; path}), each once per input: a figure
@@ -375,8 +375,10 @@ def render_figures(fits, jobs, figdir, workers=None):
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
     drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
     unavailable; at most ``workers``), costliest first, unless :mod:`skinfit.figure_store`
-    holds them from an earlier drawing of the same content. Returns one error text or None
-    per job."""
+    holds them from an earlier drawing of the same content. ``meanwhile``, when given, is
+    called once while the workers draw and returns more jobs (drawn from what it computed, in
+    this process, after it returns). figures/ is left holding only these jobs' figures.
+    Returns one error text or None per job, ``jobs`` then meanwhile's."""
     import multiprocessing
     import os
     from concurrent.futures import ProcessPoolExecutor
@@ -385,56 +387,57 @@ def render_figures(fits, jobs, figdir, workers=None):
 
     global _FITS, _JOBS
     manifest = _manifest(figdir)
-    hashes, storable = {}, {}
+    every, keys, hashes, storable, stored, fetched = [], [], {}, {}, {}, set()  # every: given, then meanwhile's jobs
 
-    def content(i):
-        if i not in hashes:
-            hashes[i] = fits[i].content_hash()
-        return hashes[i]
+    def plan(new):  # the indices of ``new`` jobs neither in the folder nor in the store, costliest first
+        first = len(every)
+        every.extend(new)
+        keys.extend(_job_keys(fits, new, hashes))
+        todo = [i for i in range(first, len(every)) if not _in_folder(manifest, every[i]["path"], keys[i])]
+        for i in todo:
+            for j in _fit_indices(every[i]):
+                if j not in storable:
+                    storable[j] = figure_store.storable(fits[j])
+            if all(storable[j] for j in _fit_indices(every[i])):
+                stored[i] = hashlib.sha256(keys[i].encode()).hexdigest()
+        fetched.update(i for i in todo if i in stored and figure_store.fetch(stored[i], every[i]["path"]))
+        todo = [i for i in todo if i not in fetched]
+        return sorted(todo, key=lambda i: -_COST.get(every[i]["func"], 1))  # stable: the report's order within a kind
 
-    def fit_indices(job):
-        if job["fit"] is None:
-            return []
-        return list(job["fit"].values()) if isinstance(job["fit"], dict) else [job["fit"]]
-
-    def inputs(job):  # what the figure is drawn from: its fits' content, or its named inputs
-        if job["fit"] is None:
-            return job["inputs"]
-        which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
-        return ",".join(f"{label}={content(i)}" for label, i in which)
-
-    keys = [f"{inputs(job)}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
-            f"{_code_key(job['func'])}" for job in jobs]
-    todo = [i for i, (job, key) in enumerate(zip(jobs, keys)) if not _in_folder(manifest, job["path"], key)]
-    stored = {}  # job -> its key's digest in the figure store, for jobs whose fits may be stored
-    for i in todo:
-        for j in fit_indices(jobs[i]):
-            if j not in storable:
-                storable[j] = figure_store.storable(fits[j])
-        if all(storable[j] for j in fit_indices(jobs[i])):
-            stored[i] = hashlib.sha256(keys[i].encode()).hexdigest()
-    fetched = {i for i in stored if figure_store.fetch(stored[i], jobs[i]["path"])}
-    todo = [i for i in todo if i not in fetched]
-    todo.sort(key=lambda i: -_COST.get(jobs[i]["func"], 1))  # stable: the report's order within a kind
-    errors = [None] * len(jobs)
-    _FITS, _JOBS = fits, jobs
+    todo = plan(jobs)
+    jobs = every
+    errors = {}
     workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
+    _FITS, _JOBS = fits, jobs  # the same list: jobs planned later are drawn here, from it
     try:
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
-            for i in {i for j in todo for i in fit_indices(jobs[j])}:
-                fits[i].complete()  # each worker draws from the complete tree, computed once here
-                fits[i].summary()  # and from its summary, inherited
+            for i in {i for j in todo for i in _fit_indices(jobs[j])}:
+                if fits[i].pending:  # computed once here; a saved fit's are read by the worker drawing it
+                    fits[i].complete()
+                fits[i].summary()  # inherited by the workers
             plots._DPI  # noqa: B018  the plotting module and matplotlib imported once, before the fork
             import matplotlib.backends.backend_pdf  # noqa: F401
             import PIL.PngImagePlugin  # noqa: F401
 
             with _frozen_heap(), ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
                                                      initializer=_init_worker, initargs=(os.getpid(),)) as pool:
-                for i, error in zip(todo, pool.map(_render_one, todo)):
-                    errors[i] = error
+                futures = {i: pool.submit(_render_one, i) for i in todo}
+                try:
+                    more = plan(meanwhile()) if meanwhile is not None else []
+                except BaseException:
+                    pool.shutdown(cancel_futures=True)
+                    raise
+                for i in more:
+                    errors[i] = _render_one(i)
+                todo += more
+                errors.update((i, f.result()) for i, f in futures.items())
         else:
             for i in todo:
                 errors[i] = _render_one(i)
+            more = plan(meanwhile()) if meanwhile is not None else []
+            for i in more:
+                errors[i] = _render_one(i)
+            todo += more
     finally:
         _FITS, _JOBS = [], []
     for i in todo:
@@ -443,7 +446,7 @@ def render_figures(fits, jobs, figdir, workers=None):
     if any(i in stored for i in todo):
         figure_store.trim()
     for i in [*todo, *fetched]:
-        if errors[i] is None:
+        if errors.get(i) is None:
             manifest[jobs[i]["path"].name] = keys[i]
         else:  # not the figure an earlier report drew there, nor a part of this one's
             manifest.pop(jobs[i]["path"].name, None)
@@ -453,7 +456,7 @@ def render_figures(fits, jobs, figdir, workers=None):
         manifest.pop(name)
         _remove_figure(figdir, name)
     _write_manifest(figdir, manifest)
-    return errors
+    return [errors.get(i) for i in range(len(jobs))]
 
 
 def _remove_figure(figdir, name):
@@ -465,6 +468,34 @@ def _remove_figure(figdir, name):
         return
     for suffix in (".png", ".pdf"):
         (figdir / name).with_suffix(suffix).unlink(missing_ok=True)
+
+
+def _fit_indices(job):
+    """The indices into the fits of the fits a figure job is drawn from."""
+    if job["fit"] is None:
+        return []
+    return list(job["fit"].values()) if isinstance(job["fit"], dict) else [job["fit"]]
+
+
+def _job_keys(fits, jobs, hashes=None):
+    """Each job's key: everything its figure is drawn from (its fits' content or its named
+    ``inputs``, the plot function, its arguments, the plotting code; see :func:`render_figures`).
+    ``hashes``: fit index -> content hash, filled as computed (shared between calls)."""
+    hashes = {} if hashes is None else hashes
+
+    def content(i):
+        if i not in hashes:
+            hashes[i] = fits[i].content_hash()
+        return hashes[i]
+
+    def inputs(job):
+        if job["fit"] is None:
+            return job["inputs"]
+        which = job["fit"].items() if isinstance(job["fit"], dict) else [("", job["fit"])]
+        return ",".join(f"{label}={content(i)}" for label, i in which)
+
+    return [f"{inputs(job)}:{job['func']}:{json.dumps([job['args'], job.get('kwargs', {})], default=str)}:"
+            f"{_code_key(job['func'])}" for job in jobs]
 
 
 def _in_folder(manifest, path, key):
@@ -582,7 +613,7 @@ def store_fit_figures(path, n_of_model=1):
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
-                 contrasts=None, designs=()):
+                 contrasts=None, designs=(), analyses=None):
     """Write a self-contained static report of ``fits`` into ``out_dir``.
 
     Parameters
@@ -606,6 +637,11 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         drawn on the forest plots.
     contrasts : dict title -> DataFrame, optional
         Contrast tables (:mod:`skinfit.contrasts`), shown with each pair's probability of direction.
+    analyses : callable, optional
+        Called once, without arguments, while the fits' figures are drawn; returns a dict of
+        any of ``comparison``, ``population``, ``populations`` and ``contrasts``, used as those
+        arguments: a caller's comparisons and populations computed while the figures are drawn
+        (``skinfit demo``).
 
     Returns
     -------
@@ -624,19 +660,22 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
             (out / name).unlink(missing_ok=True)
         before, start = {p.name for p in out.iterdir()}, time.time_ns()
         index = _write_contents(items, out, figdir, title=title, comparison=comparison, population=population,
-                                populations=populations, contrasts=contrasts, designs=designs)
+                                populations=populations, contrasts=contrasts, designs=designs, analyses=analyses)
         _record_outputs(out, before, start)
     return index
 
 
-def _write_contents(items, out, figdir, *, title, comparison, population, populations, contrasts, designs):
-    """The report's files (see :func:`write_report`), in a folder already claimed and locked."""
+def _write_contents(items, out, figdir, *, title, comparison, population, populations, contrasts, designs,
+                    analyses=None):
+    """The report's files (see :func:`write_report`), in a folder already claimed and locked.
+    The fits' figures are drawn while the sections, ``analyses`` and the figures across fits
+    are computed (:func:`render_figures`' ``meanwhile``)."""
     import jinja2
 
     from . import __version__
 
     figdir.mkdir(parents=True, exist_ok=True)
-    issues_all, sections, jobs = [], [], []
+    issues_all, sections, more = [], [], []
     per_model = {}
     for _, fit in items:
         per_model[fit.model_id] = per_model.get(fit.model_id, 0) + 1
@@ -644,43 +683,58 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
 
     # two runs of one model on one dataset: named by the options that differ
     labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items], number_identical=False)))
-    for key, fit in items:
-        if fit.pending:  # its checks of the fit to the data need the deferred groups; the diagnostics give their time
-            fit.complete()
-        summary = fit.summary()
-        diag, issues = fit_diagnostics(fit, summary)
-        summary.to_csv(out / f"{key}_summary.csv")
-        diag.to_csv(out / f"{key}_diagnostics.csv")
-        units = parameter_units(fit)
-        shown = summary.drop(columns="unit", errors="ignore")
-        shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
-        shown.index = [level_names(fit).get(n, n) for n in shown.index]
-        where = f"{labels[key]} on {fit.dataset_id}"
-        section_jobs = fit_figure_jobs(fit, len(sections), key, figdir, per_model[fit.model_id], where)
-        figures = [job["entry"] for job in section_jobs]
-        jobs += section_jobs
-        issues_all += [{"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues]
-        prov = _provenance(fit)
-        sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
-                         "prov": prov, "prov_line": _provenance_line(prov), "summary": _table(shown, "parameter"),
-                         "diagnostics": _table(diag, "check"), "figures": figures,
-                         "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
+    wheres = {key: f"{labels[key]} on {fit.dataset_id}" for key, fit in items}
+    fit_jobs = [fit_figure_jobs(fit, n, key, figdir, per_model[fit.model_id], wheres[key])
+                for n, (key, fit) in enumerate(items)]
+    given = {"comparison": comparison, "population": population, "populations": populations, "contrasts": contrasts}
 
-    across = _across_fits(items, figdir, population, populations or {}, out, jobs)
-    comparisons = []
-    tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
-    for name, table in tables.items():
-        stem = "comparison" + (f"_{file_part(name)}" if name else "")
-        table.to_csv(out / f"{stem}.csv")
-        path = figdir / f"{stem}.png"
-        entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
-                 "csv": f"{stem}.csv", "note": ranking_note(table),
-                 "figure": {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}}
-        comparisons.append(entry)
-        # drawn from the table alone: kept (in the folder and the figure store) while it is the same
-        jobs.append({"fit": None, "inputs": hashlib.sha256(table.to_csv().encode()).hexdigest(),
-                     "func": "plot_comparison", "args": (table,), "path": path, "comparison": entry})
-    for job, error in zip(jobs, render_figures([fit for _, fit in items], jobs, figdir)):
+    def meanwhile():  # while the fits' figures are drawn: everything else the page shows
+        if analyses is not None:
+            found = analyses()
+            unknown = set(found) - set(given)
+            if unknown:
+                raise TypeError(f"write_report: analyses() returned {', '.join(sorted(unknown))}")
+            given.update(found)
+        for (key, fit), section_jobs in zip(items, fit_jobs):
+            summary = fit.summary()
+            diag, issues = fit_diagnostics(fit, summary)
+            summary.to_csv(out / f"{key}_summary.csv")
+            diag.to_csv(out / f"{key}_diagnostics.csv")
+            units = parameter_units(fit)
+            shown = summary.drop(columns="unit", errors="ignore")
+            shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
+            shown.index = [level_names(fit).get(n, n) for n in shown.index]
+            where = wheres[key]
+            issues_all.extend({"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues)
+            prov = _provenance(fit)
+            sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
+                             "prov": prov, "prov_line": _provenance_line(prov), "summary": _table(shown, "parameter"),
+                             "diagnostics": _table(diag, "check"), "figures": [job["entry"] for job in section_jobs],
+                             "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
+        given["across"] = _across_fits(items, figdir, given["population"], given["populations"] or {}, out, more)
+        given["comparisons"] = []
+        comparison = given["comparison"]
+        tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
+        for name, table in tables.items():
+            stem = "comparison" + (f"_{file_part(name)}" if name else "")
+            table.to_csv(out / f"{stem}.csv")
+            path = figdir / f"{stem}.png"
+            entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
+                     "csv": f"{stem}.csv", "note": ranking_note(table),
+                     "figure": {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}}
+            given["comparisons"].append(entry)
+            # drawn from the table alone: kept (in the folder and the figure store) while it is the same
+            more.append({"fit": None, "inputs": hashlib.sha256(table.to_csv().encode()).hexdigest(),
+                         "func": "plot_comparison", "args": (table,), "path": path, "comparison": entry})
+        return more
+
+    for _, fit in items:  # its checks of the fit to the data need the deferred groups, its figures' keys
+        if fit.pending:  # the attributes these add; once, before the figure workers start
+            fit.complete()
+    jobs = [job for section_jobs in fit_jobs for job in section_jobs]
+    errors = render_figures([fit for _, fit in items], jobs, figdir, meanwhile=meanwhile)
+    across, comparisons, contrasts = given["across"], given["comparisons"], given["contrasts"]
+    for job, error in zip(jobs + more, errors):
         if not error:
             continue
         if "comparison" in job:  # listed at the top, the chart left out (its table stays)
@@ -1028,13 +1082,14 @@ def cli_report(args):
     for message in data_drift(list(zip(runs, fits))):  # never a stale result unannounced
         print(f"skinfit report: warning: {message}", file=sys.stderr)
     items = _as_fits(fits)
-    if items:  # refused before the population's cache is written into it
-        claim_report_folder(Path(args.out))
-    comparison = _comparisons(items)
-    populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
-                                            cache_dir=Path(args.out) / ".cache", saved=_saved_populations(args.runs))
-    index = write_report(dict(items), args.out, comparison=comparison, populations=populations,
-                         contrasts=contrasts, designs=designs)
+
+    def analyses():  # while the fits' figures are drawn; the folder claimed before the population's cache is written
+        populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
+                                                cache_dir=Path(args.out) / ".cache",
+                                                saved=_saved_populations(args.runs))
+        return {"comparison": _comparisons(items), "populations": populations, "contrasts": contrasts}
+
+    index = write_report(dict(items), args.out, designs=designs, analyses=analyses)
     if getattr(args, "json", False):
         import json
 

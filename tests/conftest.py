@@ -26,7 +26,10 @@ def no_figures(monkeypatch):
     tests of what a report does with its folder, tables and text."""
     from skinfit import report
 
-    monkeypatch.setattr(report, "render_figures", lambda fits, jobs, figdir, workers=None: [None] * len(jobs))
+    def drawn(fits, jobs, figdir, workers=None, meanwhile=None):
+        return [None] * (len(jobs) + len(meanwhile() if meanwhile is not None else []))
+
+    monkeypatch.setattr(report, "render_figures", drawn)
 
 
 @pytest.fixture(scope="session", autouse=True)

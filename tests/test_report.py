@@ -193,6 +193,30 @@ def test_figures_holds_only_the_figures_its_page_shows(written, ea_fit, monkeypa
     assert f"figure {trace}.png could not be drawn (RuntimeError: no trace today)" in (out / "index.html").read_text()
 
 
+def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_fit, rival, tmp_path, monkeypatch):
+    """``write_report(analyses=...)``: called once, while the figure workers draw (they are
+    alive when it runs), and its comparison is the one the page shows and charts; a key the
+    report does not take is refused."""
+    import multiprocessing
+
+    _, comparison = written
+    calls = []
+
+    def analyses():
+        calls.append([p.name for p in multiprocessing.active_children()])
+        return {"comparison": comparison}
+
+    out = tmp_path / "hooked"
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")  # every figure drawn, none copied from the store
+    report.write_report([ea_fit, rival], out, title="hooked", analyses=analyses)
+    assert len(calls) == 1 and calls[0], "no figure worker was drawing while the analyses ran"
+    assert pd.read_csv(out / "comparison.csv", index_col=0).loc["electroadhesion", "log_z"] == 512.25
+    assert "figures/comparison.png" in (out / "index.html").read_text()
+    assert (out / "figures" / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(TypeError, match="analyses.. returned contrast"):
+        report.write_report([ea_fit], tmp_path / "refused", analyses=lambda: {"contrast": {}})
+
+
 def test_failures_are_at_the_top(written, rival):
     index, _ = written
     page = _parse(index)
