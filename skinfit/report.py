@@ -407,10 +407,15 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
     todo = plan(jobs)
     jobs = every
     errors = {}
-    workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1, len(todo))
+    workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1)
+    fork = "fork" in multiprocessing.get_all_start_methods()
+    if meanwhile is not None and (not fork or min(workers, len(todo)) < 2):  # no workers drawing meanwhile:
+        todo = sorted(todo + plan(meanwhile()), key=lambda i: -_COST.get(jobs[i]["func"], 1))  # its jobs with the rest
+        meanwhile = None
+    workers = min(workers, len(todo))
     _FITS, _JOBS = fits, jobs  # the same list: jobs planned later are drawn here, from it
     try:
-        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+        if workers > 1 and fork:
             for i in {i for j in todo for i in _fit_indices(jobs[j])}:
                 if fits[i].pending:  # computed once here; a saved fit's are read by the worker drawing it
                     fits[i].complete()
@@ -434,10 +439,6 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
         else:
             for i in todo:
                 errors[i] = _render_one(i)
-            more = plan(meanwhile()) if meanwhile is not None else []
-            for i in more:
-                errors[i] = _render_one(i)
-            todo += more
     finally:
         _FITS, _JOBS = [], []
     for i in todo:

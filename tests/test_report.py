@@ -217,6 +217,28 @@ def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_
         report.write_report([ea_fit], tmp_path / "refused", analyses=lambda: {"contrast": {}})
 
 
+@pytest.mark.parametrize("fork", [True, False])
+def test_analyses_run_once_when_no_worker_draws_meanwhile(written, ea_fit, rival, tmp_path, monkeypatch, fork):
+    """Every fit's figure already in the folder (or no fork, as on macOS and Windows): the
+    analyses still run once, and the comparison chart of the table they return is drawn."""
+    import multiprocessing
+    import shutil
+
+    index, comparison = written
+    out = tmp_path / "again"
+    shutil.copytree(index.parent, out)
+    if not fork:
+        monkeypatch.setattr(multiprocessing, "get_all_start_methods", lambda: ["spawn"])
+    changed = comparison.copy()
+    changed.loc["electroadhesion_coulomb", "log_z"] = 490.5
+    chart = out / "figures" / "comparison.png"
+    stamp, calls = chart.stat().st_mtime_ns, []
+    report.write_report([ea_fit, rival], out, title="again",
+                        analyses=lambda: calls.append(1) or {"comparison": changed})
+    assert calls == [1] and chart.stat().st_mtime_ns != stamp
+    assert pd.read_csv(out / "comparison.csv", index_col=0).loc["electroadhesion_coulomb", "log_z"] == 490.5
+
+
 def test_failures_are_at_the_top(written, rival):
     index, _ = written
     page = _parse(index)
