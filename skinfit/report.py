@@ -295,6 +295,7 @@ MAX_FIGURE_WORKERS = 4
 #: workers finish together.
 _COST = {"plot_ppc": 4, "plot_trace": 3, "plot_prior_posterior": 2, "plot_pair": 2, "plot_forest": 1}
 _FITS, _JOBS = [], []  # the fits and figure jobs being drawn, inherited by forked worker processes
+_STORED = {}  # job index -> its digest in the figure store (:mod:`skinfit.figure_store`), inherited too
 
 
 def _code_key(func):
@@ -331,12 +332,18 @@ def _job_args(job):
 
 
 def _render_one(i):
-    """Draw figure job ``i`` of :data:`_JOBS` into its PNG and PDF (top level: runs in a forked
-    worker, which inherits the fits and jobs, so nothing is pickled but the index)."""
+    """Draw figure job ``i`` of :data:`_JOBS` into its PNG and PDF, and keep it in the figure
+    store when :data:`_STORED` has its digest (top level: runs in a forked worker, which
+    inherits the fits and jobs, so nothing is pickled but the index)."""
     job = _JOBS[i]
     if not gc.isenabled():  # a figure worker (_init_worker): the last figure's garbage, collected once
         gc.collect(1)  # (before the next figure, not after: a worker's last figure is not worth it)
-    return _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
+    error = _figure(lambda: getattr(plots, job["func"])(*_job_args(job), **job.get("kwargs", {})), job["path"])
+    if error is None and i in _STORED:
+        from . import figure_store
+
+        figure_store.put(_STORED[i], job["path"])
+    return error
 
 
 @contextlib.contextmanager
@@ -385,7 +392,7 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
 
     from . import figure_store
 
-    global _FITS, _JOBS
+    global _FITS, _JOBS, _STORED
     manifest = _manifest(figdir)
     every, keys, hashes, storable, stored, fetched = [], [], {}, {}, {}, set()  # every: given, then meanwhile's jobs
 
@@ -413,7 +420,7 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
         todo = sorted(todo + plan(meanwhile()), key=lambda i: -_COST.get(jobs[i]["func"], 1))  # its jobs with the rest
         meanwhile = None
     workers = min(workers, len(todo))
-    _FITS, _JOBS = fits, jobs  # the same list: jobs planned later are drawn here, from it
+    _FITS, _JOBS, _STORED = fits, jobs, stored  # the same list and dict: jobs planned later are drawn here
     try:
         if workers > 1 and fork:
             for i in {i for j in todo for i in _fit_indices(jobs[j])}:
@@ -440,10 +447,7 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
             for i in todo:
                 errors[i] = _render_one(i)
     finally:
-        _FITS, _JOBS = [], []
-    for i in todo:
-        if errors[i] is None and i in stored:
-            figure_store.put(stored[i], jobs[i]["path"])
+        _FITS, _JOBS, _STORED = [], [], {}
     if any(i in stored for i in todo):
         figure_store.trim()
     for i in [*todo, *fetched]:
