@@ -2,10 +2,10 @@
 
 h5netcdf finds each variable's dimensions by dereferencing HDF5 object references and reads
 every attribute twice; for the plain layout :meth:`skinfit.fit.Fit.save` writes (groups of
-numeric or string variables, dimensions named by dimension scales in the same group, none
-unlimited and shorter than a variable) reading the datasets directly gives the same Datasets
-in a third of the time (bench/results/report_commands.md). Anything else raises
-:class:`NotPlain`, and the caller reads the file with h5netcdf as before.
+numeric or string variables, every axis named by a dimension scale in the same group, no
+variable shorter than its dimensions) reading the datasets directly gives the same Datasets
+in half the time (bench/results/report_commands.md). Anything else raises :class:`NotPlain`,
+and the caller reads the file with h5netcdf as before.
 """
 
 import h5py
