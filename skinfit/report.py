@@ -436,8 +436,12 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
                 futures = {i: pool.submit(_render_one, i) for i in todo}
                 try:
                     more = plan(meanwhile()) if meanwhile is not None else []
-                except BaseException:
+                except BaseException:  # the figures drawn by then recorded (reused next time), the rest cancelled
                     pool.shutdown(cancel_futures=True)
+                    for i, f in futures.items():
+                        if f.done() and not f.cancelled() and f.exception() is None and f.result() is None:
+                            manifest[jobs[i]["path"].name] = keys[i]
+                    _write_manifest(figdir, manifest)
                     raise
                 for i in more:
                     errors[i] = _render_one(i)

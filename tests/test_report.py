@@ -213,8 +213,15 @@ def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_
     assert pd.read_csv(out / "comparison.csv", index_col=0).loc["electroadhesion", "log_z"] == 512.25
     assert "figures/comparison.png" in (out / "index.html").read_text()
     assert (out / "figures" / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    refused = tmp_path / "refused"
     with pytest.raises(TypeError, match="analyses.. returned contrast"):
-        report.write_report([ea_fit], tmp_path / "refused", analyses=lambda: {"contrast": {}})
+        report.write_report([ea_fit], refused, analyses=lambda: {"contrast": {}})
+    # the figures drawn by then are recorded, and the next report into the folder reuses them
+    drawn = {n for n in json.loads((refused / "figures" / ".figures.json").read_text())}
+    assert drawn and all((refused / "figures" / n).exists() for n in drawn) and not (refused / "index.html").exists()
+    stamps = {n: (refused / "figures" / n).stat().st_mtime_ns for n in drawn}
+    report.write_report([ea_fit], refused)
+    assert {n: (refused / "figures" / n).stat().st_mtime_ns for n in drawn} == stamps
 
 
 @pytest.mark.parametrize("fork", [True, False])
