@@ -35,7 +35,6 @@ import pandas as pd
 from .data import Dataset, load_dataset
 from .errors import InputError
 from .fit import fit, load_fit, resolve_inputs
-from .models import Model, load_model
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
            "read_index", "index_document",
@@ -164,7 +163,6 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     """
     from .checkpoint import CheckpointLock, remove_stale_temps
 
-    model = model if isinstance(model, Model) else load_model(model)
     from_file = not isinstance(dataset, Dataset)  # else it may be a subset: its hash is not the file's
     dataset = load_dataset(dataset) if from_file else dataset
     model, dataset, priors = resolve_inputs(model, dataset, priors)
@@ -258,7 +256,9 @@ def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
     index = path / "index.json" if path.is_dir() else path
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json written by `skinfit fit --by`)")
-    doc = json.loads(index.read_text())
+    kind, doc = index_document(index)
+    if kind != "by" or not isinstance(doc.get("groups"), list):
+        raise InputError(index, "not the index.json of `skinfit fit --by` (with 'groups')")
     fits = {}
     for g in doc["groups"]:
         label = g["group"]

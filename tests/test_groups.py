@@ -250,3 +250,15 @@ def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_pa
         (damaged / "fit.nc").write_bytes(b"not a netCDF file")
         holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(damaged), *quick], damaged,
                 "a fit.nc that skinfit cannot read: give another --out, or remove it to fit here (nothing was written)")
+
+
+@pytest.mark.parametrize("text, why", [("[]", "not the index.json of `skinfit fit --by`"),
+                                       ("3", "expected a `fit --by` index"), ('{"model": "x"}', "with 'groups'"),
+                                       ("{not json", "not readable as JSON")])
+def test_load_groups_refuses_an_index_that_is_not_a_run_by_groups(tmp_path, text, why):
+    """A campaign's index, a JSON scalar, an index without groups or not JSON: one InputError
+    naming the file (each was a TypeError, KeyError or JSONDecodeError traceback)."""
+    (tmp_path / "index.json").write_text(text)
+    with pytest.raises(skinfit.InputError, match=why) as refused:
+        load_groups(tmp_path)
+    assert str(refused.value).startswith(str(tmp_path / "index.json"))
