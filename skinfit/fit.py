@@ -932,31 +932,25 @@ class _StoredGroups:
 
     def read_light(self):
         """The tree without the groups of :data:`DEFERRED` (listed in ``names``)."""
-        import h5netcdf
-
         from ._netcdf import NotPlain, read_groups
 
-        try:  # the layout Fit.save writes, read directly; any other by h5netcdf below
+        try:  # the layout Fit.save writes, read directly; any other by h5netcdf
             order, attrs, nodes = read_groups(self.path, lambda g: g not in DEFERRED)
         except NotPlain:
-            pass
-        else:
-            self.order, self.names = order, [g for g in order if g in DEFERRED]
-            return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
-        with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
-            order = list(h.groups)  # names only: a group's metadata is read when it is opened
-            light = {g: h.groups[g] for g in order if g not in DEFERRED}
-            if h.variables or any(g.groups for g in light.values()):
-                return xr.open_datatree(self.path, engine="h5netcdf").load()  # not Fit.save's layout
-            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
-            nodes = {g: _decoded(group) for g, group in light.items()}
+            import h5netcdf
+
+            with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
+                order = list(h.groups)  # names only: a group's metadata is read when it is opened
+                light = {g: h.groups[g] for g in order if g not in DEFERRED}
+                if h.variables or any(g.groups for g in light.values()):
+                    return xr.open_datatree(self.path, engine="h5netcdf").load()  # not Fit.save's layout
+                attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
+                nodes = {g: _decoded(group) for g, group in light.items()}
         self.order, self.names = order, [g for g in order if g in DEFERRED]
         return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
 
     def read(self, tree):
         """``tree`` with the groups of ``names`` read from the file, in the file's order."""
-        import h5netcdf
-
         try:
             same = self._identity() == self.identity
         except OSError:

@@ -246,8 +246,8 @@ def _log_ticks(ax, which="x", numticks=5, sparse=False):
         locator = axis.get_minor_locator()
         if isinstance(locator, matplotlib.ticker.NullLocator):  # a shared axis: set by a sibling's marks
             shared = ax.get_shared_x_axes() if which == "x" else ax.get_shared_y_axes()
-            marks = [_MinorMarks.of(sibling, which) for sibling in shared.get_siblings(ax)]
-            locator = next((m.locator for m in marks if m is not None), None)
+            siblings = [_MinorMarks.of(sibling, which) for sibling in shared.get_siblings(ax)]
+            locator = next((m.locator for m in siblings if m is not None), None)
         if locator is not None:
             _MinorMarks(ax, which, locator)
     axis.set_minor_locator(matplotlib.ticker.NullLocator())  # the marks above stand for its minor ticks

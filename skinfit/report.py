@@ -396,6 +396,9 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
     manifest = _manifest(figdir)
     every, keys, hashes, storable, stored, fetched = [], [], {}, {}, {}, set()  # every: given, then meanwhile's jobs
 
+    def by_cost(indices):  # costliest first, so that the workers finish together; stable within a kind
+        return sorted(indices, key=lambda i: -_COST.get(every[i]["func"], 1))
+
     def plan(new):  # the indices of ``new`` jobs neither in the folder nor in the store, costliest first
         first = len(every)
         every.extend(new)
@@ -409,7 +412,7 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
                 stored[i] = hashlib.sha256(keys[i].encode()).hexdigest()
         fetched.update(i for i in todo if i in stored and figure_store.fetch(stored[i], every[i]["path"]))
         todo = [i for i in todo if i not in fetched]
-        return sorted(todo, key=lambda i: -_COST.get(every[i]["func"], 1))  # stable: the report's order within a kind
+        return by_cost(todo)
 
     todo = plan(jobs)
     jobs = every
@@ -417,7 +420,7 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
     workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1)
     fork = "fork" in multiprocessing.get_all_start_methods()
     if meanwhile is not None and (not fork or min(workers, len(todo)) < 2):  # no workers drawing meanwhile:
-        todo = sorted(todo + plan(meanwhile()), key=lambda i: -_COST.get(jobs[i]["func"], 1))  # its jobs with the rest
+        todo = by_cost(todo + plan(meanwhile()))  # its jobs drawn with the rest
         meanwhile = None
     workers = min(workers, len(todo))
     _FITS, _JOBS, _STORED = fits, jobs, stored  # the same list and dict: jobs planned later are drawn here
@@ -437,9 +440,9 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
                 try:
                     more = plan(meanwhile()) if meanwhile is not None else []
                 except BaseException:  # the figures drawn by then recorded (reused next time), the rest cancelled
-                    pool.shutdown(cancel_futures=True)
+                    pool.shutdown(cancel_futures=True)  # waits for those running: every future done or cancelled
                     for i, f in futures.items():
-                        if f.done() and not f.cancelled() and f.exception() is None and f.result() is None:
+                        if not f.cancelled() and f.exception() is None and f.result() is None:
                             manifest[jobs[i]["path"].name] = keys[i]
                     _write_manifest(figdir, manifest)
                     raise
