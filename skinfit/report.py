@@ -699,6 +699,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     fit_jobs = [fit_figure_jobs(fit, n, key, figdir, per_model[fit.model_id], wheres[key])
                 for n, (key, fit) in enumerate(items)]
     given = {"comparison": comparison, "population": population, "populations": populations, "contrasts": contrasts}
+    across, comparisons = [], []  # the page's sections across fits and of comparisons, made meanwhile
 
     def meanwhile():  # while the fits' figures are drawn: everything else the page shows
         if analyses is not None:
@@ -723,10 +724,9 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
                              "prov": prov, "prov_line": _provenance_line(prov), "summary": _table(shown, "parameter"),
                              "diagnostics": _table(diag, "check"), "figures": [job["entry"] for job in section_jobs],
                              "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
-        given["across"] = _across_fits(items, figdir, given["population"], given["populations"] or {}, out, more)
-        given["comparisons"] = []
-        comparison = given["comparison"]
-        tables = comparison if isinstance(comparison, dict) else ({"": comparison} if comparison is not None else {})
+        across.extend(_across_fits(items, figdir, given["population"], given["populations"] or {}, out, more))
+        tables = given["comparison"]
+        tables = tables if isinstance(tables, dict) else ({"": tables} if tables is not None else {})
         for name, table in tables.items():
             stem = "comparison" + (f"_{file_part(name)}" if name else "")
             table.to_csv(out / f"{stem}.csv")
@@ -734,7 +734,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
                      "csv": f"{stem}.csv", "note": ranking_note(table),
                      "figure": {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}}
-            given["comparisons"].append(entry)
+            comparisons.append(entry)
             # drawn from the table alone: kept (in the folder and the figure store) while it is the same
             more.append({"fit": None, "inputs": hashlib.sha256(table.to_csv().encode()).hexdigest(),
                          "func": "plot_comparison", "args": (table,), "path": path, "comparison": entry})
@@ -745,7 +745,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             fit.complete()
     jobs = [job for section_jobs in fit_jobs for job in section_jobs]
     errors = render_figures([fit for _, fit in items], jobs, figdir, meanwhile=meanwhile)
-    across, comparisons, contrasts = given["across"], given["comparisons"], given["contrasts"]
+    contrasts = given["contrasts"]
     for job, error in zip(jobs + more, errors):
         if not error:
             continue
