@@ -533,9 +533,9 @@ def _write_manifest(figdir, manifest):
 
 
 def _write_png(fig, path):
-    """The figure as a vector PDF (dense scatter rasterised), for papers, and as a PNG of that
-    PDF rendered by PDFium at :data:`plots._DPI`, quantised to 256 colours (a third of the size,
-    no visible change for line art). The layout is computed once (:func:`plots._fix_layout`)
+    """The figure as a vector PDF (dense scatter rasterised; TrueType fonts, :data:`plots.SAVE_RC`),
+    for papers, and as a PNG of that PDF rendered by PDFium at :data:`plots._DPI`, quantised to
+    256 colours (a third of the size, no visible change for line art). The layout is computed once (:func:`plots._fix_layout`)
     and the figure drawn once, into the PDF, which PDFium rasterises (bench/results/report.md)."""
     import io
 
@@ -545,7 +545,7 @@ def _write_png(fig, path):
     fig.set_dpi(plots._DPI)
     plots._fix_layout(fig)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="pdf", metadata={"CreationDate": None})  # the same figure, the same bytes
+    plots.save_figure(fig, buffer, format="pdf", metadata={"CreationDate": None})  # the same figure, the same bytes
     pdf = _stable_font_tags(buffer.getvalue())
     document = pypdfium2.PdfDocument(pdf)
     page = document[0]

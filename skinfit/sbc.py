@@ -296,7 +296,9 @@ def plot_ranks(result, path=None):
     fig.suptitle(f"SBC rank histograms: {result.model} on the design of {result.dataset} "
                  f"({n} simulations; grey: 99% band under uniformity)", fontsize=9)
     if path is not None:
-        fig.savefig(path, dpi=110)
+        from .plots import save_figure
+
+        save_figure(fig, path, dpi=110)
     return fig
 
 
