@@ -1047,24 +1047,27 @@ def _slot_values(post_ds, slot):
     return da.values.ravel()
 
 
-def _priors_from_attrs(attrs):
-    """The prior of each parameter, from the prior file's text saved in a fit's root ``attrs``."""
+def _priors_from_attrs(attrs, check_mass=True):
+    """The prior of each parameter, from the prior file's text saved in a fit's root ``attrs``
+    (``check_mass``: see :func:`skinfit.priors.parse_prior`)."""
     import tomllib
 
     from .priors import parse_prior
 
     doc = tomllib.loads(attrs["priors_text"])
-    return {k: parse_prior(k, v, "saved priors") for k, v in doc.items()
+    return {k: parse_prior(k, v, "saved priors", check_mass) for k, v in doc.items()
             if k not in ("schema_version", "model", "id")}
 
 
 def rebuild_posterior(tree):
-    """Reconstruct the Posterior of a saved fit from its own records (cards as saved)."""
-    _fitting()
+    """Reconstruct the Posterior of a saved fit from its own records (cards as saved). Imports
+    the posterior and priors, not the optimiser, sampler and ArviZ's tree builder
+    (:func:`_fitting`): a report's predictive check rebuilds it without fitting."""
     from types import MappingProxyType
 
     from .data import Column
     from .models import _parse_model_text
+    from .posterior import Posterior
     from .priors import PriorSet
 
     attrs = tree.attrs

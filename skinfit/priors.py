@@ -18,7 +18,6 @@ from functools import cached_property
 from types import MappingProxyType
 
 import numpy as np
-from scipy import special, stats
 
 from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError
@@ -27,15 +26,25 @@ from .references import check_source
 
 __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS"]
 
+
+
+def _stats():
+    """scipy.stats, imported on first use (~0.5 s): a saved fit's priors are read, and its trace
+    and corner plots drawn, from their bounds alone (:func:`parse_prior` with ``check_mass=False``)."""
+    from scipy import stats
+
+    return stats
+
+
 # name -> (required arguments, factory(args, lo, hi) -> frozen scipy distribution)
 DISTRIBUTIONS = {
-    "uniform": ((), lambda a, lo, hi: stats.uniform(loc=lo, scale=hi - lo)),
-    "loguniform": ((), lambda a, lo, hi: stats.loguniform(lo, hi)),
-    "normal": (("loc", "scale"), lambda a, lo, hi: stats.norm(loc=a["loc"], scale=a["scale"])),
-    "lognormal": (("median", "sigma"), lambda a, lo, hi: stats.lognorm(s=a["sigma"], scale=a["median"])),
-    "halfnormal": (("scale",), lambda a, lo, hi: stats.halfnorm(scale=a["scale"])),
-    "gamma": (("shape", "scale"), lambda a, lo, hi: stats.gamma(a=a["shape"], scale=a["scale"])),
-    "beta": (("a", "b"), lambda a, lo, hi: stats.beta(a["a"], a["b"])),
+    "uniform": ((), lambda a, lo, hi: _stats().uniform(loc=lo, scale=hi - lo)),
+    "loguniform": ((), lambda a, lo, hi: _stats().loguniform(lo, hi)),
+    "normal": (("loc", "scale"), lambda a, lo, hi: _stats().norm(loc=a["loc"], scale=a["scale"])),
+    "lognormal": (("median", "sigma"), lambda a, lo, hi: _stats().lognorm(s=a["sigma"], scale=a["median"])),
+    "halfnormal": (("scale",), lambda a, lo, hi: _stats().halfnorm(scale=a["scale"])),
+    "gamma": (("shape", "scale"), lambda a, lo, hi: _stats().gamma(a=a["shape"], scale=a["scale"])),
+    "beta": (("a", "b"), lambda a, lo, hi: _stats().beta(a["a"], a["b"])),
 }
 # Closed-form log-densities without their normalising constants (see Prior._log_norm).
 _LOGPDF = {
@@ -79,6 +88,8 @@ class Prior:
         if hi - lo < 1e-12:  # both in one tail: use survival functions
             lo, hi = f.logsf(self.upper), f.logsf(self.lower)
         if hi - lo < 1e-12:  # bounds narrow beside the spread: the density is flat there (Simpson)
+            from scipy import special
+
             a, b = self.lower, self.upper
             return float(special.logsumexp(f.logpdf([a, 0.5 * (a + b), b]), b=[1.0, 4.0, 1.0])
                          + math.log((b - a) / 6.0))
@@ -165,7 +176,11 @@ class PriorSet:
 MIN_RELATIVE_WIDTH = 1e-8
 
 
-def parse_prior(name, spec, where):
+def parse_prior(name, spec, where, check_mass=True):
+    """The :class:`Prior` of parameter ``name`` from its table ``spec`` of a prior file
+    (``where``, for errors). ``check_mass=False`` leaves out the checks that need scipy.stats
+    (the bounds inside the distribution's support, some of its mass inside them): for a saved
+    fit's priors read only for their bounds (its plots' axes), checked when it was made."""
     prefix = f"{name}."
     if not isinstance(spec, dict):
         raise InputError(where, "expected a table with dist, bounds, source", field=name)
@@ -205,6 +220,8 @@ def parse_prior(name, spec, where):
     if not source.strip():
         raise InputError(where, "every prior needs a literature source", field=prefix + "source")
     prior = Prior(name, dist, MappingProxyType(args), lo, hi, source)
+    if not check_mass:
+        return prior
     support = prior.frozen.support()
     if lo < support[0] or hi > support[1]:
         raise InputError(where, f"bounds [{lo:g}, {hi:g}] leave the support of {dist} "
