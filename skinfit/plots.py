@@ -122,9 +122,10 @@ def parameter_units(fit):
 
 
 def _slots(fit, densities=False):
-    """The sampled scalars: name, base, level, unit, prior, and whether plotted on a log axis.
-    Only a plot of the priors' ``densities`` has them checked against scipy.stats (and imports
-    it, ~0.5 s of a figure worker's first figure); the others read their bounds."""
+    """The sampled scalars: name, base, level, unit, whether plotted on a log axis (a prior
+    bounded below by 0) and, for a plot of the priors' ``densities``, the prior, checked against
+    scipy.stats; the other plots read the bounds alone and do not import it (~0.5 s of a figure
+    worker's first figure)."""
     from .fit import _priors_from_attrs
 
     priors = _priors_from_attrs(fit.attrs, check_mass=densities)
@@ -132,7 +133,7 @@ def _slots(fit, densities=False):
     out = []
     for s in fit.attr("slots"):
         prior = priors.get(s["base"])
-        out.append({**s, "unit": units.get(s["base"]), "prior": prior,
+        out.append({**s, "unit": units.get(s["base"]), "prior": prior if densities else None,
                     "log": prior is not None and prior.lower >= 0})
     return out
 

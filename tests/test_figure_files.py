@@ -116,12 +116,15 @@ def test_saved_pdfs_embed_truetype_fonts_not_type3(tmp_path):
         subtypes, embedded = _font_subtypes(pdf)
         assert "Type3" not in subtypes and "CIDFontType2" in subtypes and embedded, (name, subtypes)
         document = pypdfium2.PdfDocument(pdf)
+        page = document[0]
+        textpage = page.get_textpage()
         try:
-            page = document[0]
-            text = page.get_textpage().get_text_range()
-            assert "a title" in text and "normal force [N]" in text
-        finally:
+            text = textpage.get_text_range()
+        finally:  # children first: pypdfium2 4.0 crashes closing a page after its document
+            textpage.close()
+            page.close()
             document.close()
+        assert "a title" in text and "normal force [N]" in text
     import matplotlib
 
     assert matplotlib.rcParams["pdf.fonttype"] == 3  # the user's own setting left as it was
