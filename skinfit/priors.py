@@ -27,7 +27,6 @@ from .references import check_source
 __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS"]
 
 
-
 def _stats():
     """scipy.stats, imported on first use (~0.5 s): a saved fit's priors are read, and its trace
     and corner plots drawn, from their bounds alone (:func:`parse_prior` with ``check_mass=False``)."""

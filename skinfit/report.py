@@ -536,8 +536,9 @@ def _write_manifest(figdir, manifest):
 def _write_png(fig, path):
     """The figure as a vector PDF (dense scatter rasterised; TrueType fonts, :data:`plots.SAVE_RC`),
     for papers, and as a PNG of that PDF rendered by PDFium at :data:`plots._DPI`, quantised to
-    256 colours (a third of the size, no visible change for line art). The layout is computed once (:func:`plots._fix_layout`)
-    and the figure drawn once, into the PDF, which PDFium rasterises (bench/results/report.md)."""
+    256 colours (a third of the size, no visible change for line art). The layout is computed
+    once (:func:`plots._fix_layout`) and the figure drawn once, into the PDF, which PDFium
+    rasterises (bench/results/report.md)."""
     import io
 
     import pypdfium2
