@@ -649,10 +649,13 @@ def plot_ppc(fit, path=None):
     n_colours = len(colour_labels)
     pair = spec["pair"] if spec["pair"] and all(p in observables for p in spec["pair"]) else None
     keys = panel * n_colours + colour
+    no_curve = None  # why the noiseless median could not be computed, when it could not
     try:
         curves = _median_curves(fit, spec, keys)
-    except InputError:  # the saved card's forward function is not available here
-        curves = _ppc_median_curves(fit, bands, keys)
+    except InputError as exc:  # the saved card's forward function is not available here, or its
+        curves, no_curve = _ppc_median_curves(fit, bands, keys), exc  # posterior cannot be rebuilt
+        warnings.warn(f"{fit.model_id} on {fit.dataset_id}: the predictive check shows the predictive "
+                      f"median at the data's x, not the model's noiseless curve: {exc}", stacklevel=2)
 
     multi = len(observables) > 1 or pair is not None
     multi_colour = n_colours > 1
@@ -683,7 +686,7 @@ def plot_ppc(fit, path=None):
         ax.set_autoscale_on(False)  # (each would autoscale all the axes it shares limits with)
     x_label = axis_label(spec["x"], units.get(spec["x"]))
     x_factor = _factor(units.get(spec["x"]))
-    reference_drawn = markers_drawn = False
+    reference_drawn = markers_drawn = curve_drawn = False
     for r, o in enumerate(observables):
         f = _factor(units.get(o))
         sub = bands[bands["observable"] == o]
@@ -711,6 +714,7 @@ def plot_ppc(fit, path=None):
                 xs, ys, on_grid = curves[p * n_colours + c]
                 if on_grid:
                     ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
+                    curve_drawn = True
                 else:  # other covariates vary within the panel: no curve through the data's x
                     ax.plot(xs / x_factor, ys[o] / f, ls="", marker="_", ms=10, mew=2, color=col, zorder=4,
                             gid="median")
@@ -749,11 +753,14 @@ def plot_ppc(fit, path=None):
     if not multi:
         for ax in rows[0]:
             ax.label_outer()
-    handles = [Line2D([], [], ls="", marker="o", mfc="0.5", mec="black", mew=0.4, ms=4, label="data"),
-               Line2D([], [], color="0.2", lw=1.6, label="posterior median")]
+    handles = [Line2D([], [], ls="", marker="o", mfc="0.5", mec="black", mew=0.4, ms=4, label="data")]
+    if curve_drawn:
+        handles.append(Line2D([], [], color="0.2", lw=1.6, label="posterior median"))
     if markers_drawn:
         handles.append(Line2D([], [], ls="", marker="_", ms=10, mew=2, color="0.2",
-                              label="posterior median at the data's x\n(other covariates vary)"))
+                              label="posterior median at the data's x\n(other covariates vary)" if no_curve is None
+                              else "predictive median at the data's x\n(the model's noiseless curve\n"
+                                   "cannot be computed here)"))
     handles += [Patch(color="0.2", alpha=0.34, label="50% predictive"),
                 Patch(color="0.2", alpha=0.16, label="90% predictive")]
     clipped = {o: s for o, s in bands.attrs["below_floor"].items() if s > 0}
@@ -762,7 +769,8 @@ def plot_ppc(fit, path=None):
             f"{s:.1%} of {o.replace('_', ' ')} draws\nbelow 0 under {_noise(fit, o)} noise" for o, s in clipped.items())
             + ")"))
     if split:
-        handles.append(Line2D([], [], color="0.75", lw=0.8, label="other levels' medians"))
+        handles.append(Line2D([], [], color="0.75", lw=0.8, label="other levels' medians",
+                              **({} if curve_drawn else {"ls": "", "marker": "_", "ms": 10})))
     if pair:
         handles.append(Line2D([], [], ls="", marker="o", mfc=_COLOURS[0], mec="none", alpha=0.4, ms=3,
                               label="predictive draws (pairs)"))
@@ -831,8 +839,9 @@ def _draw_pair_row(fit, axes, cells, pair, spec, units, panel, colour, curves, p
                        lw=0, rasterized=True)
             ax.scatter(od[xo].values[idx] / fx, od[yo].values[idx] / fy, s=12, color=col,
                        edgecolor="black", linewidth=0.4, zorder=3)
-            _, ys, _ = curves[p * len(palette) + c]
-            ax.plot(ys[xo] / fx, ys[yo] / fy, color=col, lw=1.6, zorder=4)
+            _, ys, on_grid = curves[p * len(palette) + c]  # markers where the main panels have them
+            ax.plot(ys[xo] / fx, ys[yo] / fy, color=col, zorder=4,
+                    **({"lw": 1.6} if on_grid else {"ls": "", "marker": "_", "ms": 10, "mew": 2}))
         ax.set_xlabel(axis_label(xo, units.get(xo)))
         ax.set_ylabel(axis_label(yo, units.get(yo)))
         ax.set_xscale(spec["yscale"])

@@ -3,6 +3,7 @@ posterior-predictive bands that hold their stated share of data simulated from t
 
 import math
 import os
+import sys
 import tomllib
 import warnings
 from pathlib import Path
@@ -337,6 +338,37 @@ def standin(tmp_path_factory):
     del sys.modules[module.__name__]
     for name in module.__all__:
         registry.unregister("forward", f"{module.__name__}:{name}")
+
+
+def test_a_saved_fit_whose_model_function_is_gone_says_so_in_its_predictive_check(standin, tmp_path):
+    """A saved fit reported where its card's forward function is not registered (a user's model
+    whose package is not installed here): its predictive check still draws the data and bands,
+    marks the predictive median at the data's x (markers, in the pair panels too: no line through
+    the data), names it for what it is in the legend (no "posterior median" curve listed), and
+    warns with the reason."""
+    from skinfit.fit import load_fit
+
+    standin["ca"].save(tmp_path / "ca.nc")
+    ref = "skinfit.physics._plot_standin:contact_pair"
+    func = sys.modules["skinfit.physics._plot_standin"].contact_pair
+    registry.unregister("forward", ref)
+    try:
+        fit = load_fit(tmp_path / "ca.nc")
+        with pytest.warns(UserWarning, match=r"not the model's noiseless curve: .*not a registered forward function"):
+            fig = plots.plot_ppc(fit)
+    finally:
+        registry.register("forward", ref, func)
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert any(t.startswith("predictive median at the data's x") for t in legend), legend
+    assert "posterior median" not in legend
+    medians = [line for ax in fig.axes for line in ax.lines if line.get_gid() == "median"]
+    assert medians and all(line.get_linestyle() == "None" for line in medians)
+    pair_lines = [line for ax in fig.axes for line in ax.lines if line.get_gid() is None and len(line.get_xdata()) > 1]
+    assert pair_lines and all(line.get_linestyle() == "None" for line in pair_lines)
+    # the same fit where its function is registered: curves, listed as the posterior median
+    fig = plots.plot_ppc(load_fit(tmp_path / "ca.nc"))
+    assert "posterior median" in [t.get_text() for t in fig.legends[0].get_texts()]
+    assert all(line.get_linestyle() == "-" for ax in fig.axes for line in ax.lines if line.get_gid() == "median")
 
 
 def test_two_observables_one_row_each_and_one_against_the_other(standin, tmp_path):
