@@ -63,6 +63,10 @@ _MAX_PANELS_MULTI = 6
 _MAX_LEVELS = 12  # a numeric panel column with more distinct values is cut into ranges
 _N_CURVE_DRAWS = 100  # the median curve of 100 draws: no visible change from 300, a third of the cost
 _N_GRID = 160
+#: A median marked at the data's x, where no curve may join the data's points: a short bar
+#: (the other levels' medians, thin and grey, as a plain one).
+_MEDIAN_MARK = {"ls": "", "marker": "_", "ms": 10, "mew": 2}
+_OTHER_MARK = {"ls": "", "marker": "_"}
 _MAX_PAIR = 10
 #: Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008; yellow left out: too
 #: pale on white), then two darker greys.
@@ -649,11 +653,11 @@ def plot_ppc(fit, path=None):
     n_colours = len(colour_labels)
     pair = spec["pair"] if spec["pair"] and all(p in observables for p in spec["pair"]) else None
     keys = panel * n_colours + colour
-    no_curve = None  # why the noiseless median could not be computed, when it could not
+    fallback = False  # the model's noiseless median not computable here: the predictive one instead
     try:
         curves = _median_curves(fit, spec, keys)
-    except InputError as exc:  # the saved card's forward function is not available here, or its
-        curves, no_curve = _ppc_median_curves(fit, bands, keys), exc  # posterior cannot be rebuilt
+    except InputError as exc:  # the saved card's forward function is not available, or its posterior not rebuilt
+        curves, fallback = _ppc_median_curves(fit, bands, keys), True
         warnings.warn(f"{fit.model_id} on {fit.dataset_id}: the predictive check shows the predictive "
                       f"median at the data's x, not the model's noiseless curve: {exc}", stacklevel=2)
 
@@ -716,15 +720,14 @@ def plot_ppc(fit, path=None):
                     ax.plot(xs / x_factor, ys[o] / f, color=col, lw=1.6, zorder=4, gid="median")
                     curve_drawn = True
                 else:  # other covariates vary within the panel: no curve through the data's x
-                    ax.plot(xs / x_factor, ys[o] / f, ls="", marker="_", ms=10, mew=2, color=col, zorder=4,
-                            gid="median")
+                    ax.plot(xs / x_factor, ys[o] / f, color=col, zorder=4, gid="median", **_MEDIAN_MARK)
                     markers_drawn = True
             if split:  # the other levels' medians, thin and grey, for comparison
                 for c in range(n_colours):
                     if c != only and p * n_colours + c in curves:
                         xs, ys, on_grid = curves[p * n_colours + c]
                         ax.plot(xs / x_factor, ys[o] / f, color="0.75", lw=0.8, zorder=1,
-                                ls="-" if on_grid else "", marker="" if on_grid else "_", gid="other_median")
+                                gid="other_median", **({} if on_grid else _OTHER_MARK))
             if r == 0:  # one reference curve per panel, on a fine grid over the panel's x range
                 idx = np.flatnonzero(panel == p)
                 x_si = np.asarray(fit.group("constant_data")[spec["x"]].values, dtype=float)[idx]
@@ -757,8 +760,8 @@ def plot_ppc(fit, path=None):
     if curve_drawn:
         handles.append(Line2D([], [], color="0.2", lw=1.6, label="posterior median"))
     if markers_drawn:
-        handles.append(Line2D([], [], ls="", marker="_", ms=10, mew=2, color="0.2",
-                              label="posterior median at the data's x\n(other covariates vary)" if no_curve is None
+        handles.append(Line2D([], [], color="0.2", **_MEDIAN_MARK,
+                              label="posterior median at the data's x\n(other covariates vary)" if not fallback
                               else "predictive median at the data's x\n(the model's noiseless curve\n"
                                    "cannot be computed here)"))
     handles += [Patch(color="0.2", alpha=0.34, label="50% predictive"),
@@ -770,7 +773,7 @@ def plot_ppc(fit, path=None):
             + ")"))
     if split:
         handles.append(Line2D([], [], color="0.75", lw=0.8, label="other levels' medians",
-                              **({} if curve_drawn else {"ls": "", "marker": "_", "ms": 10})))
+                              **({} if curve_drawn else {**_OTHER_MARK, "ms": 10})))
     if pair:
         handles.append(Line2D([], [], ls="", marker="o", mfc=_COLOURS[0], mec="none", alpha=0.4, ms=3,
                               label="predictive draws (pairs)"))
@@ -841,7 +844,7 @@ def _draw_pair_row(fit, axes, cells, pair, spec, units, panel, colour, curves, p
                        edgecolor="black", linewidth=0.4, zorder=3)
             _, ys, on_grid = curves[p * len(palette) + c]  # markers where the main panels have them
             ax.plot(ys[xo] / fx, ys[yo] / fy, color=col, zorder=4,
-                    **({"lw": 1.6} if on_grid else {"ls": "", "marker": "_", "ms": 10, "mew": 2}))
+                    **({"lw": 1.6} if on_grid else _MEDIAN_MARK))
         ax.set_xlabel(axis_label(xo, units.get(xo)))
         ax.set_ylabel(axis_label(yo, units.get(yo)))
         ax.set_xscale(spec["yscale"])

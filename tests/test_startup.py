@@ -105,17 +105,24 @@ def test_a_saved_fits_figures_import_what_each_needs(ea_fit, tmp_path):
     """A saved fit's figures drawn in a new interpreter, as by a report's figure worker: the
     trace and corner plots read its priors' bounds without scipy.stats (~0.5 s to import); the
     predictive check rebuilds the posterior without the sampler, the optimiser or ArviZ's tree
-    builder; the prior-against-posterior plot, which draws the densities, imports scipy.stats."""
+    builder (and draws the model's noiseless curves from it, not the fallback); the
+    prior-against-posterior plot, which draws the densities, imports scipy.stats."""
     path = tmp_path / "fit.nc"
     ea_fit.save(path)
     code = ("import sys\nfrom skinfit.fit import load_fit\nfrom skinfit import plots\n"
             "fit = load_fit(sys.argv[1])\n"
             "plots.plot_trace(fit), plots.plot_pair(fit)\n"
             "print('trace, pair:', 'scipy.stats' in sys.modules)\n"
-            "plots.plot_ppc(fit)\n"
+            "import warnings\nwarnings.simplefilter('error')  # a fallback without the posterior would warn\n"
+            "fig = plots.plot_ppc(fit)\n"
+            "curves = [l for a in fig.axes for l in a.lines if l.get_gid() == 'median' and l.get_linestyle() == '-']\n"
+            "print('ppc curves:', len(curves))\n"
             "print('ppc:', sorted({m.split('.')[0] for m in sys.modules} & {'emcee', 'nlopt', 'arviz_base'}))\n"
             "plots.plot_prior_posterior(fit)\n"
             "print('prior_posterior:', 'scipy.stats' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True,
                          env={**os.environ, "MPLBACKEND": "Agg"}).stdout
     assert "trace, pair: False" in out and "ppc: []" in out and "prior_posterior: True" in out, out
+    # the posterior was rebuilt: the electroadhesion check's noiseless median curve, one per voltage level
+    n_curves = int(out.split("ppc curves: ")[1].split()[0])
+    assert n_curves == ea_fit.idata["constant_data"]["voltage"].to_series().nunique(), out
