@@ -773,7 +773,7 @@ def plot_ppc(fit, path=None):
             + ")"))
     if split:
         handles.append(Line2D([], [], color="0.75", lw=0.8, label="other levels' medians",
-                              **({} if curve_drawn else {**_OTHER_MARK, "ms": 10})))
+                              **({} if curve_drawn else _OTHER_MARK)))
     if pair:
         handles.append(Line2D([], [], ls="", marker="o", mfc=_COLOURS[0], mec="none", alpha=0.4, ms=3,
                               label="predictive draws (pairs)"))
