@@ -435,6 +435,10 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
             import matplotlib.backends.backend_pdf  # noqa: F401
             import PIL.PngImagePlugin  # noqa: F401
 
+            from ._pdf_font import derived
+
+            derived()  # the figures' font found (derived, the first time) once, before the fork
+
             with _frozen_heap(), ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
                                                      initializer=_init_worker, initargs=(os.getpid(),)) as pool:
                 futures = {i: pool.submit(_render_one, i) for i in todo}
