@@ -591,7 +591,9 @@ def _reference(spec, fit, idx, xs_si):
 def _grid(fig, nrows, ncols, n_panels, multi, n_obs, transpose=False):
     """Axes as rows[r][panel]: multi = one row per observable (+ pair row), y shared per row,
     x shared down a column (``transpose``: the same axes laid out one panel per row, one
-    observable per column); otherwise one row of ``n_panels`` wrapped, all axes shared."""
+    observable per column, x shared by every panel of the observables and by every pair
+    panel, so that only the bottom row needs x labels); otherwise one row of ``n_panels``
+    wrapped, all axes shared."""
     if not multi:
         axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True).ravel()
         for ax in axes[n_panels:]:
@@ -602,7 +604,10 @@ def _grid(fig, nrows, ncols, n_panels, multi, n_obs, transpose=False):
     for r in range(nrows):
         row = []
         for c in range(ncols):
-            sharex = rows[0][c] if 0 < r < n_obs else None
+            if transpose:  # the covariate's panels with the first of them, the pair panels with theirs
+                sharex = (row[0] if c else None) if r in (0, n_obs) else rows[0][0]
+            else:
+                sharex = rows[0][c] if 0 < r < n_obs else None
             row.append(fig.add_subplot(gs[c, r] if transpose else gs[r, c], sharex=sharex,
                                        sharey=row[0] if c else None))
         rows.append(row)
@@ -687,8 +692,9 @@ def plot_ppc(fit, path=None):
     width = min(2.9 * gcols + 0.8, MAX_WIDTH)
     title_lines = 2 if split and len(panel_labels) > 1 else 1
     n_handles = 6 + (n_colours if multi_colour else 0)
-    fig = _new_figure(width, (0.7 * (width - 0.8) / gcols + 0.45 + 0.17 * title_lines) * grows
-                      + 0.2 * math.ceil(n_handles / 3) + 0.6)
+    x_labels = 0.35  # x tick labels and the x label under a row: the bottom row's alone when transposed
+    fig = _new_figure(width, (0.7 * (width - 0.8) / gcols + 0.1 + 0.17 * title_lines) * grows
+                      + x_labels * (1 if transpose else grows) + 0.2 * math.ceil(n_handles / 3) + 0.6)
     rows = _grid(fig, nrows, ncols, n_panels, multi, len(observables), transpose)
     for ax in fig.axes:  # limits once, from all the data, below: not again after every artist
         ax.set_autoscale_on(False)  # (each would autoscale all the axes it shares limits with)
@@ -748,6 +754,11 @@ def plot_ppc(fit, path=None):
                 ax.set_title(_wrap(title, ax), fontsize=MIN_FONT + 1)
     if pair:
         _draw_pair_row(fit, rows[-1], cells, pair, spec, units, panel, colour, curves, palette)
+    if transpose:  # x shared down each column (_grid): labelled under the bottom row only
+        for row in rows:
+            for ax in row[:-1]:
+                ax.set_xlabel("")
+                ax.tick_params(labelbottom=False)
     for ax in fig.axes:
         ax.autoscale(True)
     for row in rows:
@@ -845,7 +856,7 @@ def _draw_pair_row(fit, axes, cells, pair, spec, units, panel, colour, curves, p
             ax.scatter(px[:, idx].ravel() / fx, py[:, idx].ravel() / fy, s=4, color=col, alpha=0.12,
                        lw=0, rasterized=True)
             ax.scatter(od[xo].values[idx] / fx, od[yo].values[idx] / fy, s=12, color=col,
-                       edgecolor="black", linewidth=0.4, zorder=3)
+                       edgecolor="black", linewidth=0.4, zorder=3, gid="data")
             _, ys, on_grid = curves[p * len(palette) + c]  # markers where the main panels have them
             ax.plot(ys[xo] / fx, ys[yo] / fy, color=col, zorder=4,
                     **({"lw": 1.6} if on_grid else _MEDIAN_MARK))

@@ -499,6 +499,20 @@ def test_two_observables_with_overlapping_levels_get_a_panel_per_level(tmp_path)
     titles = [a.get_title() for a in fig.axes if a.get_title()]
     assert len(titles) == len(levels) and all(lab in t for lab, t in zip(levels, titles))
     assert not layout_problems(fig)
+    columns = {}  # a panel per row: x shared down each column, labelled under the bottom row only
+    for ax in fig.axes:
+        columns.setdefault(ax.get_subplotspec().colspan.start, []).append(ax)
+    assert len(columns) == 3
+    for axes in columns.values():
+        axes.sort(key=lambda a: a.get_subplotspec().rowspan.start)
+        assert len(axes) == len(levels) and len({a.get_xlim() for a in axes}) == 1
+        labelled = [bool(a.get_xlabel()) and any(t.label1.get_visible() for t in a.xaxis.get_major_ticks())
+                    for a in axes]
+        assert labelled == [False] * (len(levels) - 1) + [True]
+        lo, hi = axes[0].get_xlim()
+        for ax in axes:  # every panel's data in view
+            x = np.concatenate([c.get_offsets()[:, 0] for c in ax.collections if c.get_gid() == "data"])
+            assert lo <= x.min() and x.max() <= hi
 
 
 def test_log_axis_makes_only_the_ticks_in_view():
