@@ -88,6 +88,18 @@ def _usable(path, expected):
         return False
 
 
+def _remove_stale(folder, age=600):
+    """Temporary files of derivations killed before their rename, older than ``age`` seconds."""
+    import time
+
+    for tmp in folder.glob(".tmp-*.ttf"):
+        try:
+            if time.time() - tmp.stat().st_mtime > age:
+                tmp.unlink()
+        except OSError:  # removed meanwhile by another process
+            pass
+
+
 class Cut(tuple):
     """``(path, source, drawn)``: the cut's file, the DejaVu Sans it was cut from and the
     characters it sets as the source does (those it keeps, combining marks left out; control
@@ -125,6 +137,7 @@ def derived():
             if font is None:
                 return None
             folder.mkdir(parents=True, exist_ok=True)
+            _remove_stale(folder)
             fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=".ttf")
             try:
                 with os.fdopen(fd, "wb") as fh:

@@ -159,11 +159,16 @@ def _derive_in_new_process(folder):
 
 def test_the_cut_is_made_once_atomically_and_again_when_damaged(tmp_path):
     """The cut is written into the cache folder named by its source's sha256 (no temporary file
-    left), the same bytes by every derivation; a damaged file there is cut again; where the
-    folder cannot be written, figures are saved with DejaVu Sans."""
+    of its own left; a killed derivation's old one removed, a recent one left to its process),
+    the same bytes by every derivation; a damaged file there is cut again; where the folder
+    cannot be written, figures are saved with DejaVu Sans."""
     folder = tmp_path / "fonts"
+    folder.mkdir()
+    (folder / ".tmp-killed.ttf").write_bytes(b"a derivation killed before its rename")
+    os.utime(folder / ".tmp-killed.ttf", (0, 0))
+    (folder / ".tmp-running.ttf").write_bytes(b"another process' derivation, under way")
     first = _derive_in_new_process(folder)
-    assert [p.name for p in folder.iterdir()] == [os.path.basename(first)]
+    assert sorted(p.name for p in folder.iterdir()) == [".tmp-running.ttf", os.path.basename(first)]
     data = open(_pdf_font.derived().source, "rb").read()
     assert _pdf_font.derive(data) == _pdf_font.derive(data) == open(first, "rb").read()
     with open(first, "r+b") as fh:  # cut short, as by a disk that filled
