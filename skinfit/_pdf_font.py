@@ -6,9 +6,11 @@ matplotlib's default, that is ~0.04 s a PDF, mostly its GPOS (kerning, mark posi
 MATH tables and the names and metrics of its 6 000 glyphs. The cut has neither table and only
 the glyphs of the alphabets and symbols figures use (:data:`RANGES`), and sets text the same:
 HarfBuzz (matplotlib >= 3.11) then kerns with the font's legacy ``kern`` table, which holds the
-same pairs, and older matplotlib uses only that table; GSUB (ligatures) is kept. A figure with
-a character outside the cut, or a combining mark (placed by GPOS), keeps the original font, as
-does one whose sans-serif text would not be DejaVu Sans (the user's own font choice).
+same pairs, and older matplotlib uses only that table; GSUB (ligatures) is kept; every glyph's
+metrics are the source's under the hinting modes text is measured with by default. A figure
+with a character outside the cut or a combining mark (placed by GPOS), one measured with the
+auto-hinter forced, and one whose sans-serif text would not be DejaVu Sans (the user's own
+font choice) keep the original font.
 """
 
 import functools
@@ -158,12 +160,23 @@ def derived():
         return None
 
 
+def _autohinted():
+    """True when text is measured with FreeType's auto-hinter forced (``text.hinting`` "force_autohint"
+    or "auto", as in the classic style): its hinted metrics of a few superscript and modifier
+    letters differ between the cut and the source (checked for every character under the other
+    hinting modes by the tests), so a layout could move by a fraction of a pixel."""
+    from matplotlib.backends.backend_agg import get_hinting_flag
+    from matplotlib.ft2font import LoadFlags
+
+    return get_hinting_flag() == LoadFlags.FORCE_AUTOHINT  # one of four modes, never combined
+
+
 def rc_for(fig):
     """rcParams under which ``fig`` is saved with the cut: its sans-serif text drawn with it
     instead of DejaVu Sans, the same glyphs in the same places. Empty (the original font) when
     the cut is not available, when sans-serif text would not be DejaVu Sans under the current
-    rcParams, or when some text of ``fig`` holds a character the cut does not set as DejaVu
-    Sans does (:attr:`Cut.drawn`)."""
+    rcParams, when text is measured with the auto-hinter forced, or when some text of ``fig``
+    holds a character the cut does not set as DejaVu Sans does (:attr:`Cut.drawn`)."""
     import matplotlib
     from matplotlib import font_manager
     from matplotlib.text import Text
@@ -175,6 +188,8 @@ def rc_for(fig):
         sans = font_manager.findfont(font_manager.FontProperties(family=["sans-serif"]), fallback_to_default=False)
     except ValueError:
         return {}
-    if os.fspath(sans) != cut.source or not set("".join(t.get_text() for t in fig.findobj(Text))) <= cut.drawn:
+    if os.fspath(sans) != cut.source or _autohinted():
+        return {}
+    if not set("".join(t.get_text() for t in fig.findobj(Text))) <= cut.drawn:
         return {}
     return {"font.sans-serif": [FAMILY, *matplotlib.rcParams["font.sans-serif"]]}
