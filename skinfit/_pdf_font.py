@@ -16,9 +16,9 @@ font choice) keep the original font.
 import functools
 import hashlib
 import os
-import tempfile
 import unicodedata
 from pathlib import Path
+from typing import NamedTuple
 
 __all__ = ["FAMILY", "RANGES", "derive", "derived", "rc_for"]
 
@@ -33,10 +33,15 @@ _FAMILY_NAME_IDS = (1, 3, 4, 16)  # family, unique id, full name, typographic fa
 
 
 def cache_dir():
-    """Where derived fonts are kept: ``<user cache folder>/skinfit/fonts``."""
-    import platformdirs
+    """Where derived fonts are kept: ``<user cache folder>/fonts``."""
+    from .paths import user_cache_root
 
-    return Path(platformdirs.user_cache_dir("skinfit", appauthor=False)) / "fonts"
+    return user_cache_root() / "fonts"
+
+
+def _kept(code):
+    """True when the cut keeps code point ``code`` (:data:`RANGES`)."""
+    return any(lo <= code < hi for lo, hi in RANGES)
 
 
 def derive(source_bytes):
@@ -56,7 +61,7 @@ def derive(source_bytes):
                              recalc_timestamp=False)
     options.drop_tables += ["GPOS", "MATH"]
     subsetter = subset.Subsetter(options)
-    subsetter.populate(unicodes=[c for c in font.getBestCmap() if any(lo <= c < hi for lo, hi in RANGES)])
+    subsetter.populate(unicodes=[c for c in font.getBestCmap() if _kept(c)])
     level = logging.getLogger("fontTools.subset").level
     logging.getLogger("fontTools.subset").setLevel(logging.ERROR)  # "FFTM NOT subset ... dropped": as meant
     try:
@@ -75,7 +80,7 @@ def _expected(source):
     """The code points of DejaVu Sans at ``source`` that the cut keeps."""
     from matplotlib.ft2font import FT2Font
 
-    return {c for c in FT2Font(source).get_charmap() if any(lo <= c < hi for lo, hi in RANGES)}
+    return {c for c in FT2Font(source).get_charmap() if _kept(c)}
 
 
 def _usable(path, expected):
@@ -90,29 +95,17 @@ def _usable(path, expected):
         return False
 
 
-def _remove_stale(folder, age=600):
-    """Temporary files of derivations killed before their rename, older than ``age`` seconds."""
-    import time
+class Cut(NamedTuple):
+    """The cut's file, the DejaVu Sans it was cut from and the characters it sets as the source
+    does (those it keeps, combining marks left out; control characters such as a line break,
+    which are never drawn)."""
 
-    for tmp in folder.glob(".tmp-*.ttf"):
-        try:
-            if time.time() - tmp.stat().st_mtime > age:
-                tmp.unlink()
-        except OSError:  # removed meanwhile by another process
-            pass
-
-
-class Cut(tuple):
-    """``(path, source, drawn)``: the cut's file, the DejaVu Sans it was cut from and the
-    characters it sets as the source does (those it keeps, combining marks left out; control
-    characters such as a line break, which are never drawn)."""
+    path: str
+    source: str
+    drawn: frozenset
 
     def __repr__(self):
         return f"Cut({self.path!r}, source={self.source!r}, {len(self.drawn)} characters)"
-
-    path = property(lambda self: self[0])
-    source = property(lambda self: self[1])
-    drawn = property(lambda self: self[2])
 
 
 @functools.cache
@@ -122,9 +115,9 @@ def derived():
     cache folder): then figures keep the original font, slower to save, otherwise the same.
 
     The file is named by the sha256 of the DejaVu Sans it is cut from and written atomically
-    (a temporary file renamed), so processes deriving it at once write the same bytes and none
-    reads a partial file; a file that is not a readable font of that family mapping exactly
-    the code points the cut keeps is derived again."""
+    (:func:`skinfit.checkpoint.replace_atomic`), so processes deriving it at once write the same
+    bytes and none reads a partial file; a file that is not a readable font of that family
+    mapping exactly the code points the cut keeps is derived again."""
     from matplotlib import font_manager
 
     try:
@@ -135,19 +128,13 @@ def derived():
         folder = cache_dir()
         path = folder / f"DejaVuSans-{hashlib.sha256(data).hexdigest()[:24]}-{_VERSION}.ttf"
         if not _usable(path, expected):
+            from .checkpoint import remove_stale_temps, replace_atomic
+
             font = derive(data)
             if font is None:
                 return None
-            folder.mkdir(parents=True, exist_ok=True)
-            _remove_stale(folder)
-            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=".ttf")
-            try:
-                with os.fdopen(fd, "wb") as fh:
-                    fh.write(font)
-                os.replace(tmp, path)
-            except BaseException:
-                Path(tmp).unlink(missing_ok=True)
-                raise
+            replace_atomic(path, font)
+            remove_stale_temps(folder, recursive=False)  # of derivations killed before their rename
             if not _usable(path, expected):
                 return None
         font_manager.fontManager.addfont(str(path))
@@ -155,7 +142,7 @@ def derived():
         if Path(found) != path:
             return None
         drawn = {chr(c) for c in expected if not unicodedata.category(chr(c)).startswith("M")}
-        return Cut((str(path), os.fspath(source), frozenset(drawn | {chr(c) for c in range(32)})))
+        return Cut(str(path), os.fspath(source), frozenset(drawn | {chr(c) for c in range(32)}))
     except Exception:  # noqa: BLE001 - the original font is always a correct choice
         return None
 

@@ -33,9 +33,9 @@ def store_dir():
     value = os.environ.get("SKINFIT_FIGURE_STORE")
     if value is not None:
         return None if value.strip().lower() in ("", "off", "0", "none") else Path(value).expanduser()
-    import platformdirs
+    from .paths import user_cache_root
 
-    return Path(platformdirs.user_cache_dir("skinfit", appauthor=False)) / "figures"
+    return user_cache_root() / "figures"
 
 
 def _limit_bytes():

@@ -23,7 +23,7 @@ from pathlib import Path
 from .errors import InputError
 
 __all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path", "explicit_search_path",
-           "shipped_root", "user_root"]
+           "shipped_root", "user_root", "user_cache_root"]
 
 KINDS = ("models", "priors", "datasets")
 ENV = "SKINFIT_PATH"
@@ -78,6 +78,14 @@ def user_root() -> Path:
     import platformdirs
 
     return Path(platformdirs.user_data_dir("skinfit", appauthor=False))
+
+
+def user_cache_root() -> Path:
+    """The per-user cache folder (e.g. ``~/.cache/skinfit`` on Linux): the figure store, the
+    figures' font."""
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("skinfit", appauthor=False))
 
 
 def search_path() -> list[Root]:

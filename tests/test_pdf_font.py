@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 import zlib
+from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -162,7 +163,7 @@ def test_the_users_own_font_choice_is_kept():
 
 
 _CACHE_SCRIPT = textwrap.dedent("""
-    import io, sys
+    import sys
     from pathlib import Path
     import matplotlib
     matplotlib.use("Agg")
@@ -172,39 +173,48 @@ _CACHE_SCRIPT = textwrap.dedent("""
     cut = _pdf_font.derived()
     fig, ax = plt.subplots()
     ax.set_title("a title")
-    buffer = io.BytesIO()
-    plots.save_figure(fig, buffer, format="pdf")
-    print("none" if cut is None else cut.path, len(buffer.getvalue()) > 1000)
+    plots.save_figure(fig, sys.argv[2])
+    print("none" if cut is None else cut.path)
 """)
 
 
-def _derive_in_new_process(folder):
-    out = subprocess.run([sys.executable, "-c", _CACHE_SCRIPT, str(folder)], capture_output=True, text=True,
-                         timeout=120)
+def _derive_in_new_process(folder, pdf):
+    """(the cut's path or "none", the families embedded in a figure saved) in a new interpreter
+    whose cache folder is ``folder``."""
+    out = subprocess.run([sys.executable, "-c", _CACHE_SCRIPT, str(folder), str(pdf)], capture_output=True,
+                         text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    path, saved = out.stdout.split()
-    assert saved == "True"  # the figure is saved, with the cut or without
-    return path
+    return out.stdout.strip(), _families(pdf.read_bytes())
+
+
+def _dead_pid():
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
 
 
 def test_the_cut_is_made_once_atomically_and_again_when_damaged(tmp_path):
     """The cut is written into the cache folder named by its source's sha256 (no temporary file
-    of its own left; a killed derivation's old one removed, a recent one left to its process),
-    the same bytes by every derivation; a damaged file there is cut again; where the folder
-    cannot be written, figures are saved with DejaVu Sans."""
+    of its own left; a killed derivation's removed, a live one's left to its process), the same
+    bytes by every derivation; a damaged file there is cut again; where the folder cannot be
+    written, figures are saved with DejaVu Sans."""
+    from skinfit.checkpoint import temp_file
+
     folder = tmp_path / "fonts"
     folder.mkdir()
-    (folder / ".tmp-killed.ttf").write_bytes(b"a derivation killed before its rename")
-    os.utime(folder / ".tmp-killed.ttf", (0, 0))
-    (folder / ".tmp-running.ttf").write_bytes(b"another process' derivation, under way")
-    first = _derive_in_new_process(folder)
-    assert sorted(p.name for p in folder.iterdir()) == [".tmp-running.ttf", os.path.basename(first)]
+    target = folder / "DejaVuSans.ttf"
+    killed = Path(temp_file(target))  # named as a writer's temporary file: host, pid, random part
+    killed.rename(killed.with_name(killed.name.replace(f".{os.getpid()}-", f".{_dead_pid()}-")))
+    running = Path(temp_file(target))  # this (live) process'
+    first, families = _derive_in_new_process(folder, tmp_path / "a.pdf")
+    assert families == {_pdf_font.FAMILY}
+    assert sorted(p.name for p in folder.iterdir()) == sorted([running.name, os.path.basename(first)])
     data = open(_pdf_font.derived().source, "rb").read()
     assert _pdf_font.derive(data) == _pdf_font.derive(data) == open(first, "rb").read()
     with open(first, "r+b") as fh:  # cut short, as by a disk that filled
         fh.truncate(5000)
-    assert _derive_in_new_process(folder) == first
+    assert _derive_in_new_process(folder, tmp_path / "b.pdf") == (first, {_pdf_font.FAMILY})
     assert open(first, "rb").read() == _pdf_font.derive(data)
     blocked = tmp_path / "a file"
     blocked.write_text("not a folder")
-    assert _derive_in_new_process(blocked / "fonts") == "none"
+    assert _derive_in_new_process(blocked / "fonts", tmp_path / "c.pdf") == ("none", {"DejaVu Sans"})
