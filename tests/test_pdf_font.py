@@ -167,6 +167,7 @@ _CACHE_SCRIPT = textwrap.dedent("""
     from pathlib import Path
     import matplotlib
     matplotlib.use("Agg")
+    matplotlib.rcParams["text.hinting"] = "default"  # matplotlib < 3.11 forces the auto-hinter: no cut
     import matplotlib.pyplot as plt
     from skinfit import _pdf_font, plots
     _pdf_font.cache_dir = lambda: Path(sys.argv[1])
