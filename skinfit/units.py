@@ -4,8 +4,8 @@ A unit is a string such as ``mN``, ``um`` / ``µm``, ``mm^2``, ``mm/s``, ``kPa``
 Coherent SI units (``N``, ``m^2/J``, ``N*s/m``: a product of SI symbols with integer powers,
 factor 1) are read by a small grammar here, and so are such products with one SI prefix
 (``mN``, ``mm^2``, ``mm/s``, ``kPa``: the factor computed as pint computes it, bit for bit,
-which tests/test_units.py checks against pint); anything else (``deg``, ``min``, ``inch``,
-two prefixes...) by pint, imported on first need (its import and registry cost ~1 s)
+which tests/test_units.py checks against pint), and so is ``deg`` alone; anything else (``deg/s``,
+``min``, ``inch``, two prefixes...) by pint, imported on first need (its import and registry cost ~1 s)
 through one application-level UnitRegistry.  Model cards state SI units and may also write a power
 as a symbol of the model (``N^n_z``, ``N^(1-c)``): :func:`check_model_unit`.
 """
@@ -47,6 +47,9 @@ UNITS = ("1", "N", "mN", "uN", "V", "kV", "m", "mm", "um", "µm", "nm", "m^2", "
 _PREFIXES = {"da": 1e1, "T": 1e12, "G": 1e9, "M": 1e6, "k": 1e3, "h": 1e2, "d": 1e-1, "c": 1e-2, "m": 1e-3,
              "u": 1e-6, "µ": 1e-6, "μ": 1e-6, "n": 1e-9, "p": 1e-12, "f": 1e-15}
 _PREFIXABLE = set(_SI) - {"kg", "1", "-"}
+#: Units outside SI read without pint when they are the whole unit text, with pint's factor
+#: (degree = pi / 180 radian) and dimension, checked in tests/test_units.py
+_WHOLE = {"deg": (math.pi / 180, frozenset())}
 
 _TOKEN = re.compile(r"\s*(?:(?P<sym>[A-Za-zµμ]+|1|-)(?:\^(?P<pow>-?\d+|\(-?\d+\)))?)\s*")
 
@@ -131,6 +134,8 @@ def parse_unit(text):
     if not isinstance(text, str) or not text.strip():
         raise ValueError(f"unknown unit {text!r}: expected a unit such as N, mN, um, mm^2, mm/s, kPa")
     text = text.strip()
+    if text in _WHOLE:
+        return Unit(text, *_WHOLE[text])
     product = _product(text, prefixed=True)
     if product is not None:
         return Unit(text, *product)
