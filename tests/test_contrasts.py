@@ -7,7 +7,7 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.contrasts import contrast, fit_contrasts, level_contrasts
+from skinfit.contrasts import contrast, fit_contrasts, hdi, level_contrasts
 from skinfit.groups import fit_by, load_groups
 
 TRUTHS = {"S01": 0.40, "S02": 0.55, "S03": 0.56}
@@ -71,3 +71,29 @@ def test_contrast_closed_form():
     assert out["diff_upper"] == pytest.approx(0.1 + 0.2772, abs=0.01)
     with pytest.raises(ValueError, match="paired"):
         contrast(a, b[:10])
+
+
+@pytest.mark.parametrize("prob", [0.5, 0.94, 0.95, 1.0])
+def test_hdi_is_arviz_stats_hdi(prob):
+    """The contrasts' HDI is ArviZ's (the independent reading) to the last bit, on skewed,
+    symmetric, tied and tiny samples."""
+    from arviz_stats import hdi as az_hdi
+
+    rng = np.random.default_rng(7)
+    samples = [rng.lognormal(0, 1, 4000), rng.normal(0, 1, 3001), rng.integers(0, 5, 200).astype(float),
+               rng.normal(size=2), np.array([3.0]), rng.standard_t(2, 10000)]
+    for x in samples:
+        assert hdi(x, prob) == tuple(np.asarray(az_hdi(x, prob=prob)).ravel().tolist())
+
+
+def test_hdi_closed_form_and_refusals():
+    # 0, 1, ..., 100: any 95-step window is 95 wide, the first one is taken
+    assert hdi(np.arange(101.0)[::-1], 0.95) == (0.0, 95.0)
+    # 901 draws 1 apart, then 100 draws 1000 apart: 890 steps fit only in the dense part
+    x = np.concatenate([np.arange(901.0), 2000.0 + 1000.0 * np.arange(100)])
+    assert hdi(x, 0.89) == (0.0, 890.0)
+    for bad in (0, 1.5):
+        with pytest.raises(ValueError, match="prob"):
+            hdi(x, bad)
+    with pytest.raises(ValueError, match="0 draws"):
+        hdi([], 0.9)
