@@ -257,6 +257,8 @@ class PopulationResult:
     inputs: dict = field(default_factory=dict)
     #: The file the result was read from (:func:`load_population`); empty when computed here.
     origin: str = ""
+    #: :meth:`diagnostics`' rows, computed once (kept in the population cache beside the draws)
+    _diagnostics: list | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def log(self):
@@ -299,7 +301,13 @@ class PopulationResult:
         return np.where(self.log, np.exp(u), u)
 
     def diagnostics(self):
-        """R-hat and bulk / tail ESS of every hyper-parameter: a table indexed like summary()."""
+        """R-hat and bulk / tail ESS of every hyper-parameter (ArviZ): a table indexed like
+        summary(). Computed once; a result read from the population cache has them already."""
+        if self._diagnostics is None:
+            self._diagnostics = self._diagnostic_rows()
+        return pd.DataFrame(self._diagnostics)
+
+    def _diagnostic_rows(self):
         import arviz as az
 
         rows = []
@@ -310,7 +318,7 @@ class PopulationResult:
         if self.corr is not None:
             for j, k in self._pairs():
                 rows.append(_diag(f"{self.parameters[j]},{self.parameters[k]}", "corr", self.corr[:, :, j, k], az))
-        return pd.DataFrame(rows)
+        return rows
 
     def _pairs(self):
         p = len(self.parameters)
@@ -670,13 +678,13 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
 # ---- the result kept by its inputs (population(cache=...)) -------------------------------
 def _cache_key(fits, settings):
     """sha256 of a population's inputs: subjects (label, fit content), settings, skinfit's code
-    and the numpy and scipy versions (:func:`skinfit.paths.code_hash`)."""
+    and the numpy, scipy and arviz-stats (its diagnostics) versions (:func:`skinfit.paths.code_hash`)."""
     import hashlib
 
     from .paths import code_hash
 
     doc = {"format": 1, "subjects": [[label, f.content_hash()] for label, f in fits.items()],
-           "settings": settings, "code": code_hash(("numpy", "scipy"))}
+           "settings": settings, "code": code_hash(("numpy", "scipy", "arviz-stats"))}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -689,7 +697,7 @@ def _write_cache(path, key, result):
     meta = {"key": key, "model_id": result.model_id, "parameters": result.parameters, "families": result.families,
             "subjects": result.subjects, "hyperpriors": result.hyperpriors, "sampler": result.sampler,
             "warnings": result.warnings, "contraction": result.contraction, "corr": result.corr is not None,
-            "inputs": result.inputs}
+            "inputs": result.inputs, "diagnostics": result.diagnostics().to_dict("records")}
     arrays = {"mu": result.mu, "sd": result.sd, "shrunk": result.shrunk,
               **({"corr": result.corr} if result.corr is not None else {}),
               **{f"separate_{i}": result.separate[s] for i, s in enumerate(result.subjects)}}
@@ -711,10 +719,12 @@ def _read_cache(path, key):
             hyper = dict(meta["hyperpriors"])
             if "_bounds" in hyper:
                 hyper["_bounds"] = {k: tuple(v) for k, v in hyper["_bounds"].items()}
-            return PopulationResult(meta["model_id"], meta["parameters"], meta["families"], meta["subjects"],
-                                    z["mu"], z["sd"], z["corr"] if meta["corr"] else None, z["shrunk"],
-                                    {s: z[f"separate_{i}"] for i, s in enumerate(meta["subjects"])}, hyper,
-                                    meta["sampler"], meta["warnings"], meta["contraction"], meta["inputs"])
+            result = PopulationResult(meta["model_id"], meta["parameters"], meta["families"], meta["subjects"],
+                                      z["mu"], z["sd"], z["corr"] if meta["corr"] else None, z["shrunk"],
+                                      {s: z[f"separate_{i}"] for i, s in enumerate(meta["subjects"])}, hyper,
+                                      meta["sampler"], meta["warnings"], meta["contraction"], meta["inputs"])
+            result._diagnostics = meta["diagnostics"]
+            return result
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         return None
 
