@@ -555,8 +555,9 @@ def _write_png(fig, path):
     pdf = _stable_font_tags(buffer.getvalue())
     document = pypdfium2.PdfDocument(pdf)
     page = document[0]
-    try:  # convert: a copy, independent of PDFium's bitmap
-        image = page.render(scale=plots._DPI / 72).to_pil().convert("RGB")
+    try:  # in RGB byte order, no alpha (the page is filled white): no conversion of PDFium's BGRA
+        image = page.render(scale=plots._DPI / 72, rev_byteorder=True, prefer_bgrx=True).to_pil()
+        image = image.convert("RGB")  # a copy, independent of PDFium's bitmap (RGBX from pypdfium2 4)
     finally:
         page.close()
         document.close()
