@@ -68,24 +68,42 @@ def file_part(text):
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
-def _fmt(value):
-    """Table cell text: 6 significant digits for floats (enough to check against the CSV)."""
+def _fmt(value, na=False):
+    """Table cell text: 6 significant digits for floats (enough to check against the CSV); a NaN
+    is ``n/a`` in a cell that has no value by construction (``na``), else ``nan``."""
     if isinstance(value, (bool, np.bool_)):
         return "yes" if value else "no"
     if isinstance(value, (int, np.integer)):
         return str(int(value))
     if isinstance(value, (float, np.floating)):
-        return "nan" if math.isnan(value) else f"{value:.6g}"
+        return ("n/a" if na else "nan") if math.isnan(value) else f"{value:.6g}"
     return "" if value is None else str(value)
 
 
-def _table(df, index_name):
+def _table(df, index_name, na=None):
     """A DataFrame as {columns, rows, text} of formatted cells, the index as first column;
-    ``text[k]`` is True for a column of words (left-aligned and wrapped in the page)."""
+    ``text[k]`` is True for a column of words (left-aligned and wrapped in the page). ``na``:
+    a boolean array (rows, columns) of the cells that have no value by construction (see
+    :func:`_not_applicable`), shown as ``n/a`` rather than ``nan`` (a number not computed)."""
+    na = np.zeros(df.shape, dtype=bool) if na is None else np.asarray(na, dtype=bool)
     return {"columns": [index_name] + [str(c) for c in df.columns],
-            "rows": [[_fmt(i)] + [_fmt(v) for v in row] for i, row in zip(df.index, df.itertuples(index=False))],
+            "rows": [[_fmt(i)] + [_fmt(v, a) for v, a in zip(row, flags)]
+                     for i, row, flags in zip(df.index, df.itertuples(index=False), na)],
             "text": [True] + [not (pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c]))
                               for c in df.columns]}
+
+
+#: A contrast's ratio columns: NaN where B's draws change sign (:func:`skinfit.contrasts.contrast`)
+_RATIO = ["ratio_median", "ratio_lower", "ratio_upper"]
+
+
+def _not_applicable(df, rows, columns):
+    """(rows, columns) mask of ``df``: True in ``columns`` on the rows where ``rows`` (a boolean
+    array) holds, the cells that have no value by construction: a derived quantity's MAP, tau
+    and contraction (it has no prior), a population's derived rows' R-hat and ESS (those of
+    ``mu`` and ``tau``, from which they are computed, are on their own rows), a contrast's
+    ratio A / B where B's draws change sign."""
+    return np.asarray(rows, dtype=bool)[:, None] & np.isin(np.asarray(df.columns, dtype=object), columns)[None, :]
 
 
 def level_names(fit):
@@ -728,7 +746,10 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             issues_all.extend({"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues)
             prov = _provenance(fit)
             sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
-                             "prov": prov, "prov_line": _provenance_line(prov), "summary": _table(shown, "parameter"),
+                             "prov": prov, "prov_line": _provenance_line(prov),
+                             "summary": _table(shown, "parameter", _not_applicable(
+                                 shown, shown.get("note", pd.Series("", index=shown.index)).astype(str)
+                                 .str.startswith("derived"), ["map", "tau", "contraction"])),
                              "diagnostics": _table(diag, "check"), "figures": [job["entry"] for job in section_jobs],
                              "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
         across.extend(_across_fits(items, figdir, given["population"], given["populations"] or {}, out, more))
@@ -775,8 +796,9 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
         stem = "contrasts_" + file_part(name).strip("_")
         shown = contrast_section(table)
         shown.to_csv(out / f"{stem}.csv", index=False)
+        top = shown.head(20).set_index("A")
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
-                                "table": _table(shown.head(20).set_index("A"), "A")})
+                                "table": _table(top, "A", _not_applicable(top, np.ones(len(top), dtype=bool), _RATIO))})
 
     design_sections = []
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
@@ -926,7 +948,9 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
             pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
             if pop_info["effects"] is not None:
                 pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
-            pop_tables = {"hyper": _table(pop_info["hyper"].reset_index().set_index("parameter"), "parameter"),
+            hyper = pop_info["hyper"].reset_index().set_index("parameter")
+            pop_tables = {"hyper": _table(hyper, "parameter", _not_applicable(
+                              hyper, hyper["quantity"].isin(["mean", "sd", "median"]), ["r_hat", "ess_bulk", "ess_tail"])),
                           "csv": f"population_{safe}.csv",
                           "subjects": [{"parameter": k, "table": _table(v, "subject")}
                                        for k, v in pop_info["subjects"].items()],

@@ -58,6 +58,34 @@ def test_report_on_subjects_shows_tables_population_and_contrasts(subject_fits, 
     row = shown[(shown["A"] == "S01") & (shown["B"] == "S02") & (shown["parameter"] == "alpha_a0")].iloc[0]
     assert row["prob_direction"] == pytest.approx(max(row["p_greater"], 1 - row["p_greater"]))
     assert "Contrasts: contact_area on contact_area_synthetic: between subjects" in html
+    # cells without a value by construction read n/a, and only those: the population's mean, sd
+    # and median rows have no R-hat or ESS of their own (mu's and tau's are on their rows), a
+    # derived quantity (gamma, p) no MAP, tau or contraction; no other cell is nan
+    from test_report import _frame, _parse
+
+    page = _parse(index)
+    diag = ["r_hat", "ess_bulk", "ess_tail"]
+    (hyper,) = [_frame(t) for (kind, _), t in page.tables.items() if kind == "population"]
+    derived_rows = hyper["quantity"].isin(["mean", "sd", "median"])
+    assert derived_rows.any() and (~derived_rows).any()
+    assert (hyper.loc[derived_rows.to_numpy(), diag] == "n/a").all().all()
+    assert not hyper.loc[(~derived_rows).to_numpy(), diag].isin(["n/a", "nan"]).any().any()
+    summaries = [_frame(t) for (kind, _), t in page.tables.items() if kind == "summary"]
+    assert len(summaries) == len(SUBJECTS)
+    for table in summaries:
+        derived = table["note"].str.startswith("derived").to_numpy()
+        assert derived.any() and (~derived).any()
+        assert (table.loc[derived, ["map", "tau", "contraction"]] == "n/a").all().all()
+        assert not table.loc[derived, diag + ["mean"]].isin(["n/a", "nan"]).any().any()
+        assert not table.loc[~derived].isin(["n/a", "nan"]).any().any()
+    # a ratio A / B where B's draws change sign (m1, a slope about 0): n/a, as its CSV cell is empty
+    (key, shown_contrasts), = [(k, _frame(t)) for k, t in page.tables.items() if k[0] == "contrasts"]
+    csv = pd.read_csv(tmp_path / "r" / key[1]).head(len(shown_contrasts))
+    undefined = csv["ratio_median"].isna().to_numpy()
+    assert undefined.any() and (~undefined).any()
+    assert (shown_contrasts["ratio_median"].to_numpy() == "n/a").tolist() == undefined.tolist()
+    nans = [(k, row) for k, t in page.tables.items() for row in t["rows"] if "nan" in row]
+    assert not nans, nans[:3]
 
 
 def test_a_parameter_indexed_by_a_condition_names_it(subject_fits):
