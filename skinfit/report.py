@@ -68,6 +68,16 @@ def file_part(text):
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
+def _unique_stem(stem, name, taken):
+    """``stem`` (a file name made from ``name`` by :func:`file_part`), or with 8 hex of the sha256
+    of the exact ``name`` when another table of the report took it: names that differ only in
+    characters a file name cannot hold (``d[subject=Zoë]``, ``d[subject=Zoé]``) get two files."""
+    while stem in taken:
+        stem = f"{stem}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+    taken.add(stem)
+    return stem
+
+
 def _fmt(value, na=False):
     """Table cell text: 6 significant digits for floats (enough to check against the CSV); a NaN
     is ``n/a`` in a cell that has no value by construction (``na``), else ``nan``."""
@@ -725,6 +735,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
                 for n, (key, fit) in enumerate(items)]
     given = {"comparison": comparison, "population": population, "populations": populations, "contrasts": contrasts}
     across, comparisons = [], []  # the page's sections across fits and of comparisons, made meanwhile
+    stems = set()  # the file names of the comparison and contrast tables, one per table
 
     def meanwhile():  # while the fits' figures are drawn: everything else the page shows
         if analyses is not None:
@@ -756,7 +767,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
         tables = given["comparison"]
         tables = tables if isinstance(tables, dict) else ({"": tables} if tables is not None else {})
         for name, table in tables.items():
-            stem = "comparison" + (f"_{file_part(name)}" if name else "")
+            stem = _unique_stem("comparison" + (f"_{file_part(name)}" if name else ""), name, stems)
             table.to_csv(out / f"{stem}.csv")
             path = figdir / f"{stem}.png"
             entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
@@ -793,7 +804,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     for name, table in (contrasts or {}).items():
         from .report_groups import contrast_section
 
-        stem = "contrasts_" + file_part(name).strip("_")
+        stem = _unique_stem("contrasts_" + file_part(name).strip("_"), name, stems)
         shown = contrast_section(table)
         shown.to_csv(out / f"{stem}.csv", index=False)
         top = shown.head(20).set_index("A")
@@ -928,11 +939,11 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
     index = {key: i for i, (key, _) in enumerate(items)}
     for key, fit in items:
         by_model.setdefault(fit.model_id, []).append((key, fit))
-    out = []
+    out, taken = [], set()
     for model_id, group in by_model.items():
         if len(group) < 2:
             continue
-        safe = file_part(model_id)
+        safe = _unique_stem(file_part(model_id), model_id, taken)  # model ids a+b and a_b: two names
         subj = subjects_section(dict(group))
         labelled = {subj["labels"][k]: f for k, f in group}
         if len(labelled) < len(group):  # the same subject label twice: keep the unique keys

@@ -277,3 +277,31 @@ def test_subjects_of_two_datasets_make_one_population_and_a_subject_twice_none(s
     assert populations == {} and not any("between subjects" in k for k in contrasts)
     assert said == ["skinfit report: no population or contrasts between subjects for contact_area: fitted more than "
                     "once: S01 (report keys S01 and again)"]
+
+
+def test_tables_whose_names_differ_only_in_letters_a_file_name_cannot_hold_get_their_own_files(subject_fits,
+                                                                                               tmp_path):
+    """Two contrast tables titled by subjects Zoë and Zoé (file_part makes both Zo_): each is
+    written to its own CSV, linked from its own section, holding its own rows; nothing is
+    overwritten."""
+    from skinfit.contrasts import contrast
+    from test_report import _parse
+
+    rng = np.random.default_rng(3)
+
+    def table(shift):
+        rows = [{"A": "0 N", "B": "5 N", **contrast(rng.normal(shift, 1, 500), rng.normal(0, 1, 500))}]
+        return pd.DataFrame(rows).assign(parameter="alpha")
+
+    names = ["contact_area on d[subject=Zoë]: between conditions", "contact_area on d[subject=Zoé]: between conditions"]
+    tables = dict(zip(names, (table(1.0), table(-1.0))))
+    index = report.write_report(list(subject_fits.values())[:1], tmp_path / "r", contrasts=tables)
+    page = _parse(index)
+    files = [key[1] for key in page.tables if key[0] == "contrasts"]
+    assert len(files) == 2 and len(set(files)) == 2
+    for name, file in zip(names, files):
+        assert (tmp_path / "r" / file).exists() and file in page.links
+        written = pd.read_csv(tmp_path / "r" / file)
+        assert written["diff_mean"].iloc[0] == pytest.approx(tables[name]["diff_mean"].iloc[0], rel=1e-12)
+    assert pd.read_csv(tmp_path / "r" / files[0])["diff_mean"].iloc[0] > 0 > \
+        pd.read_csv(tmp_path / "r" / files[1])["diff_mean"].iloc[0]
