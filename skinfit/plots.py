@@ -305,8 +305,9 @@ def _fix_layout(fig):
     saved = []
     for ax in fig.axes:
         for axis in (ax.xaxis, ax.yaxis):
-            if not axis.label.get_text():  # nothing to place: placed on the spine, inside the axes,
-                axis.set_label_coords(*((0.5, 0) if axis is ax.xaxis else (0, 0.5)))  # not measured again at each pass
+            if not axis.label.get_text():  # an empty label: put on the spine once, not placed by
+                # measuring the tick labels again at each layout pass and draw
+                axis.set_label_coords(*((0.5, 0) if axis is ax.xaxis else (0, 0.5)))
             saved.append((axis, axis.get_minor_locator(), axis.isDefault_minloc))
             axis.set_minor_locator(matplotlib.ticker.NullLocator())
     try:

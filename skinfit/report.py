@@ -960,8 +960,9 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
             if pop_info["effects"] is not None:
                 pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
             hyper = pop_info["hyper"].reset_index().set_index("parameter")
-            pop_tables = {"hyper": _table(hyper, "parameter", _not_applicable(
-                              hyper, hyper["quantity"].isin(["mean", "sd", "median"]), ["r_hat", "ess_bulk", "ess_tail"])),
+            derived = hyper["quantity"].isin(["mean", "sd", "median"])  # computed from mu and tau
+            pop_tables = {"hyper": _table(hyper, "parameter",
+                                          _not_applicable(hyper, derived, ["r_hat", "ess_bulk", "ess_tail"])),
                           "csv": f"population_{safe}.csv",
                           "subjects": [{"parameter": k, "table": _table(v, "subject")}
                                        for k, v in pop_info["subjects"].items()],

@@ -299,8 +299,8 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     result = population(fits, "mu", cache=sys.argv[2], rng=4, ess_target=100, rhat_max=1.05)
 table = result.summary()
-print(json.dumps({"imported": sorted(m for m in sys.modules if m.split(".")[0] in ("arviz", "arviz_base", "arviz_stats")),
-                  "summary": table.to_json()}))
+arviz = sorted(m for m in sys.modules if m.split(".")[0] in ("arviz", "arviz_base", "arviz_stats"))
+print(json.dumps({"imported": arviz, "summary": table.to_json()}))
 """
 
 
