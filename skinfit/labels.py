@@ -15,10 +15,14 @@ def noise_suffix(observables, obs):
 
 
 def parameter_units(fit):
-    """Parameter (or noise parameter) name -> SI unit as stated in the model card, from a
-    fit's root attributes (``fit.attrs``: ``model_card``, ``setup``)."""
+    """Parameter (or noise parameter, or derived quantity) name -> SI unit as stated in the
+    model card, from a fit's root attributes (``fit.attrs``: ``model_card``, ``setup``, and
+    ``derived`` when the card derives quantities)."""
     card = tomllib.loads(fit.attrs["model_card"])
     units = {p["name"]: p["unit"] for p in card.get("parameters", [])}
+    if "derived" in fit.attrs:
+        for name, unit in json.loads(fit.attrs["derived"])["quantities"].items():
+            units.setdefault(name, unit)
     obs_units = {o["name"]: o["unit"] for o in card.get("observables", [])}
     setup = json.loads(fit.attrs["setup"])
     observables = setup["observables"]

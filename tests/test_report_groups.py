@@ -76,6 +76,10 @@ def test_report_on_subjects_shows_tables_population_and_contrasts(subject_fits, 
         derived = table["note"].str.startswith("derived").to_numpy()
         assert derived.any() and (~derived).any()
         assert (table.loc[derived, ["map", "tau", "contraction"]] == "n/a").all().all()
+        # a derived quantity's unit in the unit column, as its note and the card state it
+        card_units = json.loads(next(iter(subject_fits.values())).attrs["derived"])["quantities"]
+        assert [card_units[n.split("[")[0]] for n in table.index[derived]] == list(table.loc[derived, "unit"])
+        assert all(f"[{u}]" in note for u, note in zip(table.loc[derived, "unit"], table.loc[derived, "note"]))
         assert not table.loc[derived, diag + ["mean"]].isin(["n/a", "nan"]).any().any()
         assert not table.loc[~derived].isin(["n/a", "nan"]).any().any()
     # a ratio A / B where B's draws change sign (m1, a slope about 0): n/a, as its CSV cell is empty
