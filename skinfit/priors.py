@@ -239,8 +239,10 @@ def check_priors_for(priors, model):
                          f"{model.id!r} (copy it and set model = {model.id!r} if it applies)", field="model")
 
 
-def load_priors(name: str | os.PathLike) -> PriorSet:
-    """Load a prior file by id (``priors/<id>.toml``) or by path."""
+def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet:
+    """Load a prior file by id (``priors/<id>.toml``) or by path. ``check_mass=False``: every
+    check but those that need scipy.stats (:func:`parse_prior`), for a caller that needs the
+    file's identity (its sha256) and what it declares, not its distributions."""
     path = find_file("priors", name)
     doc, text = read_toml(path)
     where = _display(path)
@@ -251,7 +253,7 @@ def load_priors(name: str | os.PathLike) -> PriorSet:
     for key, spec in doc.items():
         if key in ("schema_version", "model", "id"):
             continue
-        priors[key] = parse_prior(key, spec, where)
+        priors[key] = parse_prior(key, spec, where, check_mass)
         check_source(priors[key].source, where, f"{key}.source")  # a key into references.toml
     if not priors:
         raise InputError(where, "no priors defined")
