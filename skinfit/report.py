@@ -68,16 +68,6 @@ def file_part(text):
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
 
 
-def _unique_stem(stem, name, taken):
-    """``stem`` (a file name made from ``name`` by :func:`file_part`), or with 8 hex of the sha256
-    of the exact ``name`` when another table of the report took it: names that differ only in
-    characters a file name cannot hold (``d[subject=Zoë]``, ``d[subject=Zoé]``) get two files."""
-    while stem in taken:
-        stem = f"{stem}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
-    taken.add(stem)
-    return stem
-
-
 def _fmt(value, na=False):
     """Table cell text: 6 significant digits for floats (enough to check against the CSV); a NaN
     is ``n/a`` in a cell that has no value by construction (``na``), else ``nan``."""
@@ -103,17 +93,14 @@ def _table(df, index_name, na=None):
                               for c in df.columns]}
 
 
-#: A contrast's ratio columns: NaN where B's draws change sign (:func:`skinfit.contrasts.contrast`)
-_RATIO = ["ratio_median", "ratio_lower", "ratio_upper"]
-
-
-def _not_applicable(df, rows, columns):
+def _not_applicable(df, columns, rows=None):
     """(rows, columns) mask of ``df``: True in ``columns`` on the rows where ``rows`` (a boolean
-    array) holds, the cells that have no value by construction: a derived quantity's MAP, tau
-    and contraction (it has no prior), a population's derived rows' R-hat and ESS (those of
-    ``mu`` and ``tau``, from which they are computed, are on their own rows), a contrast's
-    ratio A / B where B's draws change sign."""
-    return np.asarray(rows, dtype=bool)[:, None] & np.isin(np.asarray(df.columns, dtype=object), columns)[None, :]
+    array; every row when None) holds, the cells that have no value by construction: a derived
+    quantity's MAP, tau and contraction (it has no prior), a population's derived rows' R-hat
+    and ESS (those of ``mu`` and ``tau``, from which they are computed, are on their own rows),
+    a contrast's ratio A / B where B's draws change sign."""
+    rows = np.ones(len(df), dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
+    return rows[:, None] & np.isin(np.asarray(df.columns, dtype=object), columns)[None, :]
 
 
 def level_names(fit):
@@ -155,7 +142,13 @@ def _markdown(table):
 def _key(fit, taken, label=None):
     """File-name key of a fit: model and dataset, and the options that tell two runs of them
     apart (``label`` from :func:`skinfit.run_labels.run_labels`)."""
-    base = file_part(f"{label or fit.model_id}__{fit.dataset_id}").strip("_.")
+    return _unique(file_part(f"{label or fit.model_id}__{fit.dataset_id}").strip("_."), taken)
+
+
+def _unique(base, taken):
+    """``base``, or ``base_2``, ``base_3``... the first not in ``taken`` (which it joins): one
+    file name per fit or table of a report, also for names that differ only in characters
+    :func:`file_part` replaces (``d[subject=Zoë]``, ``d[subject=Zoé]``; model ids ``a+b``, ``a_b``)."""
     key, k = base, 2
     while key in taken:
         key, k = f"{base}_{k}", k + 1
@@ -753,21 +746,21 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             shown = summary.drop(columns="unit", errors="ignore")
             shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
             shown.index = [level_names(fit).get(n, n) for n in shown.index]
+            derived = shown["note"].str.startswith("derived", na=False).to_numpy()  # no MAP, tau, prior of its own
             where = wheres[key]
             issues_all.extend({"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues)
             prov = _provenance(fit)
             sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
                              "prov": prov, "prov_line": _provenance_line(prov),
-                             "summary": _table(shown, "parameter", _not_applicable(
-                                 shown, shown.get("note", pd.Series("", index=shown.index)).astype(str)
-                                 .str.startswith("derived"), ["map", "tau", "contraction"])),
+                             "summary": _table(shown, "parameter",
+                                               _not_applicable(shown, ["map", "tau", "contraction"], derived)),
                              "diagnostics": _table(diag, "check"), "figures": [job["entry"] for job in section_jobs],
                              "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
         across.extend(_across_fits(items, figdir, given["population"], given["populations"] or {}, out, more))
         tables = given["comparison"]
         tables = tables if isinstance(tables, dict) else ({"": tables} if tables is not None else {})
         for name, table in tables.items():
-            stem = _unique_stem("comparison" + (f"_{file_part(name)}" if name else ""), name, stems)
+            stem = _unique("comparison" + (f"_{file_part(name)}" if name else ""), stems)
             table.to_csv(out / f"{stem}.csv")
             path = figdir / f"{stem}.png"
             entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
@@ -804,12 +797,13 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     for name, table in (contrasts or {}).items():
         from .report_groups import contrast_section
 
-        stem = _unique_stem("contrasts_" + file_part(name).strip("_"), name, stems)
+        stem = _unique("contrasts_" + file_part(name).strip("_"), stems)
         shown = contrast_section(table)
         shown.to_csv(out / f"{stem}.csv", index=False)
         top = shown.head(20).set_index("A")
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
-                                "table": _table(top, "A", _not_applicable(top, np.ones(len(top), dtype=bool), _RATIO))})
+                                "table": _table(top, "A", _not_applicable(  # NaN where B's draws change sign
+                                    top, ["ratio_median", "ratio_lower", "ratio_upper"]))})
 
     design_sections = []
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
@@ -943,7 +937,7 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
     for model_id, group in by_model.items():
         if len(group) < 2:
             continue
-        safe = _unique_stem(file_part(model_id), model_id, taken)  # model ids a+b and a_b: two names
+        safe = _unique(file_part(model_id), taken)
         subj = subjects_section(dict(group))
         labelled = {subj["labels"][k]: f for k, f in group}
         if len(labelled) < len(group):  # the same subject label twice: keep the unique keys
@@ -962,7 +956,7 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
             hyper = pop_info["hyper"].reset_index().set_index("parameter")
             derived = hyper["quantity"].isin(["mean", "sd", "median"])  # computed from mu and tau
             pop_tables = {"hyper": _table(hyper, "parameter",
-                                          _not_applicable(hyper, derived, ["r_hat", "ess_bulk", "ess_tail"])),
+                                          _not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),
                           "csv": f"population_{safe}.csv",
                           "subjects": [{"parameter": k, "table": _table(v, "subject")}
                                        for k, v in pop_info["subjects"].items()],
