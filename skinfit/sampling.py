@@ -169,13 +169,13 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     which R-hat is gated (ArviZ's R-hat includes a folded variant that is not invariant under
     the log and joint transforms of the sampling coordinates).
     """
-    t0 = time.perf_counter()
-    nwalkers, d = p0.shape
-    seed = int(rng.integers(2**32 - 1))
     import emcee
 
     from .moves import default_moves
 
+    t0 = time.perf_counter()
+    nwalkers, d = p0.shape
+    seed = int(rng.integers(2**32 - 1))
     indep = independence_move(proposal) if proposal is not None else None
     if moves is None:
         moves = default_moves() if indep is None else adaptive_moves(indep)
