@@ -101,3 +101,54 @@ def test_another_layout_is_read_by_h5netcdf(subject_file, tmp_path, edit, why):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # xarray's note on phony dimensions
         xr.testing.assert_identical(fit.idata, xr.open_datatree(path).load())
+
+
+def _odd_attributes(f):
+    """Attributes of every kind HDF5 and h5py allow, on the root, a group and a variable."""
+    for obj in (f, f["constant_data"], f["constant_data"]["normal_force"]):
+        a = obj.attrs
+        a["empty_text"] = h5py.Empty(h5py.string_dtype("ascii", 1))
+        a["empty_float"] = h5py.Empty("f8")
+        a["fixed_text"] = np.bytes_("newtons")
+        a["fixed_texts"] = np.array([b"N", b"mm^2"], dtype="S4")
+        a["one_fixed_char"] = np.bytes_("N")
+        a["vlen_text"] = "Zoë"
+        a["vlen_texts"] = np.array(["Zoë", "Zoé"], dtype=h5py.string_dtype())
+        a["one_element"] = np.array([2.5])
+        a["ints"] = np.array([1, 2, 3], dtype="i2")
+        a["matrix"] = np.arange(6.0).reshape(2, 3)
+        a.create("array_type", data=np.arange(6.0).reshape(2, 3), dtype=np.dtype(("f4", (3,))))
+        a["nan"] = np.nan
+
+
+def test_attributes_are_read_as_h5py_and_h5netcdf_read_them(subject_file, tmp_path):
+    """Each attribute read once by the direct reader has the value, type and HDF5 type h5py's
+    ``attrs[name]`` and ``attrs.get_id(name)`` give (references compared by what they name),
+    for every kind of attribute; the groups are then what h5netcdf reads."""
+    from skinfit._netcdf import _attributes
+
+    path = _edited(subject_file, tmp_path / "odd.nc", _odd_attributes)
+    with h5py.File(path) as f:
+        objects = [f["/"]]
+        f.visititems(lambda _, o: objects.append(o))
+        kinds = set()
+        for obj in objects:
+            ours = _attributes(obj)
+            theirs = [k for k in obj.attrs if k not in ("REFERENCE_LIST", "_NCProperties", "_nc3_strict")]
+            assert list(ours) == theirs, obj.name
+            for k, (value, dtype) in ours.items():
+                expected = obj.attrs[k]
+                assert dtype == obj.attrs.get_id(k).dtype and type(value) is type(expected), (obj.name, k)
+                kinds.add(k)
+                if k == "DIMENSION_LIST":  # references: the same objects named
+                    def named(refs):
+                        return [[f[r].name for r in axis] for axis in refs]
+
+                    assert named(value) == named(expected)
+                elif isinstance(expected, h5py.Empty):
+                    assert value == expected
+                else:
+                    nan = np.asarray(expected).dtype.kind == "f"
+                    assert np.array_equal(value, expected, equal_nan=nan), (obj.name, k)
+    assert {"empty_text", "empty_float", "vlen_texts", "array_type", "DIMENSION_LIST", "CLASS"} <= kinds
+    _assert_read_as_h5netcdf_reads(path)
