@@ -389,11 +389,36 @@ def _init_worker(parent):
     """A figure worker ends when the report process that forked it dies (even by SIGKILL). Its
     garbage collector runs once per figure (:func:`_render_one`) instead of on every few
     thousand objects made, which a figure's artists triggered ~60 times each (2.5% of the
-    figures' time, bench/results/report_commands.md)."""
+    figures' time, bench/results/report_commands.md). Its heap keeps the memory figures free
+    (:func:`_keep_freed_memory`)."""
     from .checkpoint import watch_parent  # not campaign's: that imports the fitting machinery
 
     watch_parent(parent)
     gc.disable()
+    _keep_freed_memory()
+
+
+#: glibc's ``mallopt`` parameters (malloc.h) and the values a figure worker sets: blocks up to
+#: 256 MiB from the heap, not mapped for each; the heap's free top returned to the system only
+#: beyond 512 MiB.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_WORKER_MALLOC = ((_M_MMAP_THRESHOLD, 256 << 20), (_M_TRIM_THRESHOLD, 512 << 20))
+
+
+def _keep_freed_memory():
+    """In a figure worker (a process that ends with the report) on glibc: large blocks (a
+    figure's ~7 MB bitmaps and their copies) come from the heap and what is freed stays in it
+    for the next figure, instead of being returned to the system and each of its pages faulted
+    in and zeroed again (~7 000 page faults a figure; bench/results/report_commands.md). Returns
+    whether it was set; elsewhere (no ``mallopt``) nothing changes."""
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (AttributeError, OSError):
+        return False
+    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+    return all(mallopt(param, value) == 1 for param, value in _WORKER_MALLOC)
 
 
 def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):

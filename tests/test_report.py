@@ -4,7 +4,9 @@ table in it holds the saved fits' numbers."""
 import json
 import math
 import os
+import platform
 import re
+import sys
 import warnings
 from html.parser import HTMLParser
 from pathlib import Path
@@ -489,6 +491,42 @@ def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
         if was_enabled:
             gc.enable()
     assert all(job["path"].exists() for job in jobs)
+
+
+_REDRAW = """
+import gc, os, resource, sys
+from pathlib import Path
+from skinfit import plots, report
+from skinfit.fit import load_fit
+
+if sys.argv[2] == "worker":
+    report._init_worker(os.getppid())  # as a figure worker starts
+else:
+    gc.disable()  # as in a worker
+fit = load_fit(sys.argv[1])
+for k in range(3):
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    report._write_png(plots.plot_trace(fit), Path(sys.argv[1]).with_name(f"trace{k}.png"))
+    gc.collect(1)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
+                    reason="glibc's mallopt only: elsewhere a figure worker's memory is left as it is")
+def test_a_figure_worker_keeps_the_memory_figures_free(ea_fit, tmp_path):
+    """A figure worker's heap keeps what a figure frees (report._init_worker sets
+    _keep_freed_memory): drawing the same figure a third time faults in almost no new pages,
+    where by default the memory of its bitmaps is returned to the system and every page of it
+    faulted in and zeroed again."""
+    import subprocess
+
+    path = ea_fit.save(tmp_path / "fit.nc")
+    faults = {}
+    for mode in ("default", "worker"):
+        faults[mode] = int(subprocess.run([sys.executable, "-c", _REDRAW, str(path), mode], capture_output=True,
+                                          text=True, env={**os.environ, "MPLBACKEND": "Agg"}, check=True).stdout)
+    assert faults["worker"] < 300 and faults["default"] > 5 * faults["worker"], faults
 
 
 def test_table_names_break_at_their_underscores_and_stay_escaped(written):
