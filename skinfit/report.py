@@ -269,15 +269,8 @@ def _provenance_line(p):
 # ---- the report -----------------------------------------------------------------------------
 def _as_fits(fits):
     if isinstance(fits, dict):
-        items = [(str(k), as_fit(v)) for k, v in fits.items()]
-        taken, out = set(), []
-        for name, f in items:
-            key = file_part(name).strip("_.") or "fit"
-            while key in taken:
-                key += "_"
-            taken.add(key)
-            out.append((key, f))
-        return out
+        taken = set()
+        return [(_unique(file_part(str(k)).strip("_.") or "fit", taken), as_fit(v)) for k, v in fits.items()]
     from .run_labels import run_labels
 
     fits = [as_fit(f) for f in ([fits] if not isinstance(fits, (list, tuple)) else fits)]

@@ -309,3 +309,11 @@ def test_tables_whose_names_differ_only_in_letters_a_file_name_cannot_hold_get_t
         assert written["diff_mean"].iloc[0] == pytest.approx(tables[name]["diff_mean"].iloc[0], rel=1e-12)
     assert pd.read_csv(tmp_path / "r" / files[0])["diff_mean"].iloc[0] > 0 > \
         pd.read_csv(tmp_path / "r" / files[1])["diff_mean"].iloc[0]
+
+
+def test_fits_given_by_names_a_file_name_cannot_tell_apart_get_their_own_keys(subject_fits):
+    """Fits given as a mapping whose names file_part makes alike (Zoë, Zoé; an empty name) get
+    one key each, by the scheme of every other file of a report (base, base_2, ...)."""
+    fit = subject_fits["S01"]
+    assert [k for k, _ in report._as_fits({"Zoë": fit, "Zoé": fit, "": fit, "Zo_2": fit})] == \
+        ["Zo", "Zo_2", "fit", "Zo_2_2"]
