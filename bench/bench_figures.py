@@ -52,8 +52,11 @@ def main():
         finally:
             pdf_time[0] += time.process_time() - t0
 
-    def render_figures(fits, jobs, figdir):
+    def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
         import gc
+
+        if meanwhile is not None:  # the page's other sections, computed while the workers draw: their figures too
+            jobs = list(jobs) + list(meanwhile())
 
         for f in fits:  # as render_figures does before it forks its workers: not figure time
             f.complete()

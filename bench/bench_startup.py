@@ -27,7 +27,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import machine_info, machine_text  # noqa: E402
+from common import machine_info, machine_text, user_env  # noqa: E402
 
 PY = sys.executable
 NO_DASK = "import sys; sys.modules['dask'] = None; "
@@ -56,7 +56,8 @@ def commands(tmp, source=None):
 
 def importtime(cmd, cwd, top=6):
     """The largest cumulative top-level imports of a command (``-X importtime``), in ms."""
-    out = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], capture_output=True, text=True, cwd=cwd).stderr
+    out = subprocess.run([cmd[0], "-X", "importtime", *cmd[1:]], capture_output=True, text=True, cwd=cwd,
+                         env=user_env()).stderr
     rows = []
     for line in out.splitlines():
         parts = line.split("|")
@@ -72,7 +73,7 @@ def run(cmd, cwd):
     """(wall s, CPU s = user + sys) of one run of ``cmd`` as a child process in folder ``cwd``
     (not this checkout, whose ``skinfit`` folder ``-m``/``-c`` would put first on the path)."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=cwd)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=cwd, env=user_env())
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -91,7 +92,8 @@ def main():
     load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:
         cmds = commands(tmp, args.source)
-        subprocess.run(cmds[3][1], capture_output=True, check=True, cwd=tmp)  # compile .pyc files, warm the disk cache
+        # write the .pyc files, warm the disk cache
+        subprocess.run(cmds[3][1], capture_output=True, check=True, cwd=tmp, env=user_env())
         times = {name: [] for name, _, _ in cmds}
         cpu = {name: [] for name, _, _ in cmds}
         for _ in range(args.repeats):
