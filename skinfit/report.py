@@ -402,8 +402,8 @@ def _keep_freed_memory():
     """In a figure worker (a process that ends with the report) on glibc: large blocks (a
     figure's ~7 MB bitmaps and their copies) come from the heap and what is freed stays in it
     for the next figure, instead of being returned to the system and each of its pages faulted
-    in and zeroed again (~7 000 page faults a figure; bench/results/report_commands.md). Returns
-    whether it was set; elsewhere (no ``mallopt``) nothing changes."""
+    in and zeroed again (~21 000 page faults a 21-panel check; bench/results/report_commands.md).
+    Returns whether it was set; elsewhere (no ``mallopt``) nothing changes."""
     import ctypes
 
     try:
