@@ -45,7 +45,6 @@ hard): exact when the population puts negligible mass outside them.
 import math
 
 import numpy as np
-from scipy.special import gammaln
 
 from .posterior import standardised_squares
 from .priors import _LOGPDF
@@ -302,6 +301,8 @@ def _proposal(subs, mu, prec, spec):
 
 def _t_logpdf(x, loc, L, nu):
     """Multivariate t log-density with location ``loc`` and precision ``L L^T``: x (..., d)."""
+    from scipy.special import gammaln  # here: reading a cached population imports no scipy
+
     d = x.shape[-1]
     y = np.einsum("...ji,...j->...i", L, x - loc)  # L^T (x - loc)
     q = (y * y).sum(axis=-1)

@@ -9,7 +9,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import special
 
 from .labels import noise_suffix
 from .units import to_si
@@ -419,6 +418,8 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
+                        from scipy import special  # here: a report rebuilding a saved fit needs no scipy
+
                         nu = self._noise_param(theta, "nu", o)
                         value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
                                  - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))

@@ -763,7 +763,8 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             units = parameter_units(fit)
             shown = summary.drop(columns="unit", errors="ignore")
             shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
-            shown.index = [level_names(fit).get(n, n) for n in shown.index]
+            named = level_names(fit)
+            shown.index = [named.get(n, n) for n in shown.index]
             derived = shown["note"].str.startswith("derived", na=False).to_numpy()  # no MAP, tau, prior of its own
             where = wheres[key]
             issues_all.extend({"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues)
