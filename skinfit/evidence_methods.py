@@ -106,7 +106,7 @@ def bridge_sampling(log_target, samples, *, rng, n_repeats=1, ess=None, tol=1e-1
 
 
 def _bridge_once(log_target, samples, rng, ess_fraction, tol, max_iter):
-    from scipy.special import logsumexp  # here: a report reading cached evidence imports no scipy
+    from scipy.special import logsumexp  # here, not with the module: comparing cached evidence needs no scipy
 
     n, d = samples.shape
     order = rng.permutation(n)

@@ -301,7 +301,7 @@ def _proposal(subs, mu, prec, spec):
 
 def _t_logpdf(x, loc, L, nu):
     """Multivariate t log-density with location ``loc`` and precision ``L L^T``: x (..., d)."""
-    from scipy.special import gammaln  # here: reading a cached population imports no scipy
+    from scipy.special import gammaln  # here, not with the module: reading a cached population needs no scipy
 
     d = x.shape[-1]
     y = np.einsum("...ji,...j->...i", L, x - loc)  # L^T (x - loc)

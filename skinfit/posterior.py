@@ -418,7 +418,7 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
-                        from scipy import special  # here: a report rebuilding a saved fit needs no scipy
+                        from scipy import special  # here, not with the module (a report imports it, needing no scipy)
 
                         nu = self._noise_param(theta, "nu", o)
                         value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
