@@ -39,8 +39,11 @@ def _attributes(obj):
     h5a.iterate(oid, lambda name, *_: names.append(name),
                 index_type=h5.INDEX_CRT_ORDER if tracked else h5.INDEX_NAME)
     out = {}
-    for name in names:  # as h5py.AttributeManager.__getitem__ reads each
-        key = name.decode("utf-8", "surrogateescape")
+    for name in names:  # named as h5py names them (UTF-8, else the bytes), each read as its attrs[name] reads it
+        try:
+            key = name.decode("utf-8")
+        except UnicodeDecodeError:
+            key = name
         if key in _UNUSED:
             continue
         attr = h5a.open(oid, name)

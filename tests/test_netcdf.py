@@ -119,6 +119,7 @@ def _odd_attributes(f):
         a["matrix"] = np.arange(6.0).reshape(2, 3)
         a.create("array_type", data=np.arange(6.0).reshape(2, 3), dtype=np.dtype(("f4", (3,))))
         a["nan"] = np.nan
+        a[b"not utf-8 \xff"] = 1.0  # h5py names it by its bytes
 
 
 def test_attributes_are_read_as_h5py_and_h5netcdf_read_them(subject_file, tmp_path):
@@ -150,5 +151,6 @@ def test_attributes_are_read_as_h5py_and_h5netcdf_read_them(subject_file, tmp_pa
                 else:
                     nan = np.asarray(expected).dtype.kind == "f"
                     assert np.array_equal(value, expected, equal_nan=nan), (obj.name, k)
-    assert {"empty_text", "empty_float", "vlen_texts", "array_type", "DIMENSION_LIST", "CLASS"} <= kinds
+    assert {"empty_text", "empty_float", "vlen_texts", "array_type", "DIMENSION_LIST", "CLASS",
+            b"not utf-8 \xff"} <= kinds
     _assert_read_as_h5netcdf_reads(path)
