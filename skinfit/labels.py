@@ -6,12 +6,18 @@ import tomllib
 
 from .units import si_unit
 
-__all__ = ["variable_attrs", "annotate", "noise_suffix", "parameter_units"]
+__all__ = ["variable_attrs", "annotate", "noise_suffix", "parameter_units", "derived_units"]
 
 
 def noise_suffix(observables, obs):
     """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
     return "" if len(observables) == 1 else f"_{obs}"
+
+
+def derived_units(fit):
+    """Derived quantity name -> SI unit, as the model card's ``[derived]`` table states them
+    (recorded in a fit's root attribute ``derived``); empty for a card that derives none."""
+    return json.loads(fit.attrs["derived"])["quantities"] if "derived" in fit.attrs else {}
 
 
 def parameter_units(fit):
@@ -20,9 +26,8 @@ def parameter_units(fit):
     ``derived`` when the card derives quantities)."""
     card = tomllib.loads(fit.attrs["model_card"])
     units = {p["name"]: p["unit"] for p in card.get("parameters", [])}
-    if "derived" in fit.attrs:
-        for name, unit in json.loads(fit.attrs["derived"])["quantities"].items():
-            units.setdefault(name, unit)
+    for name, unit in derived_units(fit).items():
+        units.setdefault(name, unit)
     obs_units = {o["name"]: o["unit"] for o in card.get("observables", [])}
     setup = json.loads(fit.attrs["setup"])
     observables = setup["observables"]

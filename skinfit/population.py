@@ -59,6 +59,9 @@ __all__ = ["population", "PopulationResult", "PopulationWarning", "population_ta
            "load_run", "DrawsFit", "FAMILIES"]
 
 FAMILIES = ("normal", "lognormal", "student_t")
+#: The population quantities :meth:`PopulationResult.summary` computes from mu and tau (natural
+#: units): the R-hat and ESS that describe them are those of mu and tau, on their own rows.
+DERIVED = ("mean", "sd", "median")
 _LKJ_ETA = 2.0
 
 
@@ -334,8 +337,7 @@ class PopulationResult:
         diag = self.diagnostics().set_index(["parameter", "quantity"])
         for j, name in enumerate(self.parameters):
             coord = self.coordinates[j]
-            items = [("mean", draws["mean"], "natural"), ("sd", draws["sd"], "natural"),
-                     ("median", draws["median"], "natural"), ("mu", self.mu, coord), ("tau", self.sd, coord)]
+            items = [*((q, draws[q], "natural") for q in DERIVED), ("mu", self.mu, coord), ("tau", self.sd, coord)]
             for qty, x, c in items:
                 lo, med, hi = np.quantile(x[:, :, j], [a, 0.5, 1 - a])
                 d = diag.loc[(name, "sd" if qty == "tau" else "mu")] if qty in ("mu", "tau") else None

@@ -23,7 +23,7 @@ import pandas as pd
 
 from .errors import InputError
 from .fit import _wall_time_text, as_fit
-from .labels import parameter_units
+from .labels import derived_units, parameter_units
 from .paths import package_version
 from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
@@ -763,9 +763,9 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             units = parameter_units(fit)
             shown = summary.drop(columns="unit", errors="ignore")
             shown.insert(0, "unit", [units.get(_base(n), "") for n in shown.index])
+            derived = np.isin([_base(n) for n in shown.index], list(derived_units(fit)))  # no MAP, tau, prior
             named = level_names(fit)
             shown.index = [named.get(n, n) for n in shown.index]
-            derived = shown["note"].str.startswith("derived", na=False).to_numpy()  # no MAP, tau, prior of its own
             where = wheres[key]
             issues_all.extend({"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues)
             prov = _provenance(fit)
@@ -969,11 +969,13 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
         pop_result = populations.get(model_id)
         pop_info = population_section(pop_result) if pop_result is not None else None
         if pop_info is not None:
+            from .population import DERIVED
+
             pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
             if pop_info["effects"] is not None:
                 pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
             hyper = pop_info["hyper"].reset_index().set_index("parameter")
-            derived = hyper["quantity"].isin(["mean", "sd", "median"])  # computed from mu and tau
+            derived = hyper["quantity"].isin(DERIVED)  # computed from mu and tau
             pop_tables = {"hyper": _table(hyper, "parameter",
                                           _not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),
                           "csv": f"population_{safe}.csv",
