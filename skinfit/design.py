@@ -45,14 +45,15 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # names used only in annotations
-    import os
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
     from .fit import Fit
     from .models import Model
 
 import json
 import math
-from dataclasses import dataclass, field
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +61,7 @@ import pandas as pd
 from scipy import special, stats
 
 from .errors import InputError
-from .units import UNITS, dimension, to_si
+from .units import NONNEGATIVE, dimension, same_dimension, to_si
 
 __all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
            "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "load_design", "cli_design"]
@@ -95,6 +96,23 @@ class DesignProblem:
     log_marginal: object
     observables: tuple = ("y",)
     noise_priors: tuple | None = None  # per observable, the prior of its noise sd (discrimination)
+    # Before :func:`_restrict_to_support` conditioned the draws on the physical support (all None
+    # until it did): ``base_draws`` (D0, d) the unrestricted draws, ``in_support`` (D0,) bool the
+    # ones kept as ``draws``, ``support`` the design points (covariate -> (P,) SI) at which every
+    # kept draw predicts inside the support.  ``base_cov`` (d, d): the covariance whose
+    # regression of nuisance on target coordinates turns a draw into one of the conditional
+    # (a diagonal one for independent priors: swap, exactly); None = ``cov``.
+    base_draws: np.ndarray | None = None
+    in_support: np.ndarray | None = None
+    support: dict | None = None
+    base_cov: np.ndarray | None = None
+    # A fit's posterior, whose nuisance coordinates given the targets are not Gaussian: its
+    # unnormalised log density ``log_joint(v)`` (k,) in v = (u, extra) (k, d + e), the extra
+    # coordinates (the fit's noise parameters, log) of each base draw in ``extra_draws`` (D0, e).
+    # :func:`eig_nmc` then weights its conditional draws by it (self-normalised importance
+    # sampling); None: the regression of ``base_cov`` alone (exact for a Gaussian, a prior file).
+    log_joint: object = None
+    extra_draws: np.ndarray | None = None
 
     @property
     def d(self):
@@ -191,48 +209,187 @@ def _split_draws(problem, rng, n_outer, n_inner):
 
 
 # ---- nested Monte Carlo, one candidate at a time ----------------------------------------------
-def eig_nmc(problem, X, rng, *, params=None, n_outer=500, n_inner=500, upper=False):
-    """Expected information gain of one measurement at each candidate, by nested Monte Carlo.
+def conditional_gain(cov, focus):
+    """B (d - f, f) = Sigma_eta,psi Sigma_psi,psi^-1 for the target coordinates ``focus`` (psi)
+    and the rest (eta) of a covariance ``cov`` (d, d): for a Gaussian, eta + B (psi* - psi) of
+    a joint draw (psi, eta) is a draw of eta | psi*, exactly; B = 0 (a plain swap) when the
+    cross-covariance is zero, as for the independent priors of a prior file."""
+    nuis = np.setdiff1d(np.arange(len(cov)), focus)
+    return np.linalg.solve(cov[np.ix_(focus, focus)], cov[np.ix_(focus, nuis)]).T
 
-    Returns (eig, se), each (C,) in nats: the mean over outer draws n of
-    log p^(y_n|psi_n) - log p^(y_n), and its standard error over the outer draws.  The
-    evidence p^(y_n) averages p(y_n|u) over the M inner draws *and the outer draw itself*
-    (the prior contrastive estimate of Foster et al. 2019, "Variational Bayesian optimal
-    experimental design"): a lower bound of the EIG in expectation, each term at most
-    log(M + 1), so a measurement whose outcome the inner draws miss cannot blow the mean up.
-    ``upper=True`` leaves the outer draw out (Ryan 2003's estimator, an upper bound in
-    expectation; heavy-tailed when the prior predictive is); the two bracket the EIG.
+
+def _extra_support(problem, X):
+    """The support points of ``problem`` that are not candidates of X (covariate -> (E,) SI),
+    or None: a draw of the current distribution predicts inside the support at all of them."""
+    if not problem.support:
+        return None
+    keys = list(X)
+
+    def rows(Z):
+        return [tuple(np.nan_to_num(np.asarray(Z[k], float)[i], nan=np.inf) for k in keys)
+                for i in range(_n_candidates(Z))]
+
+    have = set(rows(X))
+    extra = [i for i, row in enumerate(rows(problem.support)) if row not in have]
+    return _take_x(problem.support, np.array(extra, dtype=int)) if extra else None
+
+
+def _nuisance_sampler(problem, rng, out_idx, focus, n_draws, df=10.0):
+    """A function psi (R, f) -> (v (R, M, d + e), log w (R, M)): ``n_draws`` draws of the
+    nuisance coordinates given each row of target values psi, in v = (u, extra), with their
+    log importance weights up to a constant per row.
+
+    Without ``problem.log_joint``: draws of the distribution before the support restriction
+    (none of them an outer draw), their nuisance coordinates moved by B (psi - their psi)
+    (:func:`conditional_gain`; exact for a Gaussian, a swap for independent priors), weights 1.
+    With it (a fit's posterior): draws of a Student-t (``df``) around the Gaussian regression
+    of the nuisance coordinates (extra ones included) on the targets, with its residual
+    covariance, weighted by log_joint / proposal density; exact whatever the posterior's shape,
+    as the weights correct the proposal."""
+    base = problem.draws if problem.base_draws is None else problem.base_draws
+    d = problem.d
+    if problem.log_joint is None:
+        out_base = out_idx if problem.in_support is None else np.flatnonzero(problem.in_support)[out_idx]
+        pool = base[rng.permutation(np.setdiff1d(np.arange(len(base)), out_base))[:n_draws]]
+        cov = problem.cov if problem.base_cov is None else problem.base_cov
+        nuis = np.setdiff1d(np.arange(d), focus)
+        gain = conditional_gain(np.atleast_2d(cov), focus)
+
+        def draw(psi):
+            v = np.broadcast_to(pool, (len(psi), len(pool), d)).copy()
+            v[:, :, nuis] += (psi[:, None, :] - pool[None, :, focus]) @ gain.T
+            v[:, :, focus] = psi[:, None, :]
+            return v, np.zeros(v.shape[:2])
+
+        return draw
+    joint = base if problem.extra_draws is None else np.hstack([base, problem.extra_draws])
+    nuis = np.setdiff1d(np.arange(joint.shape[1]), focus)
+    loc, cov = joint.mean(axis=0), np.atleast_2d(np.cov(joint, rowvar=False))
+    gain = conditional_gain(cov, focus)
+    shape = cov[np.ix_(nuis, nuis)] - gain @ cov[np.ix_(focus, nuis)]
+    chol = np.linalg.cholesky(0.5 * (shape + shape.T))
+
+    def draw(psi):
+        R, p = len(psi), len(nuis)
+        z = rng.standard_normal((R, n_draws, p))
+        maha = (z * z).sum(axis=-1)
+        scale = np.sqrt(rng.chisquare(df, (R, n_draws)) / df)
+        z /= scale[..., None]
+        maha /= scale * scale
+        v = np.empty((R, n_draws, joint.shape[1]))
+        v[:, :, nuis] = (loc[nuis] + (psi - loc[focus]) @ gain.T)[:, None, :] + z @ chol.T
+        v[:, :, focus] = psi[:, None, :]
+        log_q = -0.5 * (df + p) * np.log1p(maha / df)  # the t density up to its constant
+        with np.errstate(invalid="ignore"):
+            log_w = problem.log_joint(v.reshape(-1, v.shape[-1])).reshape(R, n_draws) - log_q
+        return v, np.where(np.isnan(log_w), -np.inf, log_w)
+
+    return draw
+
+
+def eig_nmc(problem, X, rng, *, params=None, n_outer=500, n_inner=500, n_blocks=10, batch=False):
+    """Expected information gain (EIG) about ``params`` of one measurement at each candidate of
+    X, by nested Monte Carlo (Ryan 2003, "Estimating expected information gains for experimental
+    designs with application to the random fatigue-limit model"); a mapping of (C,) arrays, nats:
+
+    ``eig``, the estimate to read: the mean over N outer draws (psi_n, eta_n, y_n) of
+    log p^(y_n | psi_n) - log p^(y_n).  p^(y_n) averages p(y_n | u) over M inner draws *and the
+    outer draw itself* (prior contrastive estimation, Foster et al. 2019, "Variational Bayesian
+    optimal experimental design": a lower bound in expectation, each term at most log(M + 1), so
+    it saturates where the EIG nears log M).  For a target subset psi, p^(y_n | psi_n) averages
+    p(y_n | psi_n, eta) over M draws of the nuisance eta given psi_n (:func:`_nuisance_sampler`)
+    and, likewise, the outer draw itself; then it is no bound, but its bias is smaller (bench/
+    results/design.md).  ``eig_bias``: the estimate at M/2 inner draws minus the one at M, the
+    bias of ``eig`` if it falls as 1/M (Rainforth et al. 2018, "On nesting Monte Carlo
+    estimators"); near saturation it understates it.  ``eig_se``: the Monte Carlo standard
+    error, the outer draws' plus a jackknife over ``n_blocks`` blocks of the inner draws (shared
+    by every outer draw, so the outer standard error alone misses their part).
+
+    ``eig_upper``, ``eig_upper_se``: an upper bound in expectation, the outer draw left out of
+    p^(y_n) (Ryan 2003); heavy-tailed where the inner draws miss the outcomes: the top of a
+    bracket, not an estimate.
+
+    ``batch=True``: the EIG of all the points of X measured together instead, (1,) arrays.
+
+    Draws predicting outside the support (at a candidate or another point of
+    ``problem.support``) are not draws of the current distribution and get weight 0.  The outer,
+    inner and nuisance draws are shared by every candidate (common random numbers: differences
+    between candidates are estimated better than values).
     """
-    u_out, u_in = _split_draws(problem, rng, n_outer, n_inner)
-    N, M, C = len(u_out), len(u_in), _n_candidates(X)
-    mu_out = problem.mean(u_out, X)  # (N, C, r)
-    y = mu_out + problem.sigma * _noise(rng, mu_out.shape, problem.nu)
-    mu_in = problem.mean(u_in, X)  # (M, C, r)
     focus = problem.focus_index(params)
-    log_true = _log_lik(y, mu_out, problem.sigma, problem.nu)  # (N, C)
-    log_evid = np.empty((N, C))
-    block = max(1, _CELLS // max(N * M, 1))
-    for c in range(0, C, block):
-        s = slice(c, c + block)
-        log_evid[:, s] = _log_sum_lik(y[:, s], mu_in[:, s], problem.sigma, problem.nu)
-    if len(focus) == problem.d:
-        log_num = log_true
-    else:  # p(y | psi_n): inner draws with the outer draw's target values swapped in
-        log_num = np.empty((N, C))
-        rows = max(1, _CELLS // max(M * C, 1))
+    D = len(problem.draws)
+    perm = rng.permutation(D)
+    N = min(n_outer, D // 2)
+    M = min(n_inner, D - N)
+    out_idx, u_out, u_in = perm[:N], problem.draws[perm[:N]], problem.draws[perm[N:N + M]]
+    C = _n_candidates(X)
+    sigma, nu = problem.sigma, problem.nu
+    if batch:  # the points of X as the observables of one candidate
+        sigma, nu = np.tile(sigma, C), np.tile(nu, C)
+
+    def fold(mu):
+        return mu.reshape(*mu.shape[:-2], 1, -1) if batch else mu
+
+    K = max(2, min(n_blocks, M // 2))
+    K -= K % 2  # halves of the inner draws are whole blocks
+    blocks = np.array_split(np.arange(M), K)
+    size = np.array([len(b) for b in blocks], float)
+    mu_out = fold(problem.mean(u_out, X))  # (N, C, r), or (N, 1, C r) for a batch
+    y = mu_out + sigma * _noise(rng, mu_out.shape, nu)
+    mu_in = fold(problem.mean(u_in, X))
+    log_true = _log_lik(y, mu_out, sigma, nu)  # (N, C)
+    C = y.shape[1]
+    den = np.empty((K, N, C))  # log sum over each block of inner draws of p(y_n | u_m)
+    step = max(1, _CELLS * K // max(N * M * y.shape[2], 1))
+    for c in range(0, C, step):
+        s = slice(c, c + step)
+        for k, b in enumerate(blocks):
+            den[k, :, s] = _log_sum_lik(y[:, s], mu_in[b][:, s], sigma, nu)
+    num = None
+    if len(focus) < problem.d:
+        draw = _nuisance_sampler(problem, rng, out_idx, focus, M)
+        extra = _extra_support(problem, X)
+        Xe = X if extra is None else {k: np.concatenate([np.asarray(X[k], float), extra[k]]) for k in X}
+        # per block: log sum of w p(y_n | psi_n, eta), log sum of w, log sum of w^2
+        num, wsum, w2sum = np.empty((K, N, C)), np.empty((K, N)), np.empty((K, N))
+        rows = max(1, _CELLS // max(M * _n_candidates(Xe), 1))
         for i in range(0, N, rows):
-            part = u_out[i:i + rows]
-            u = np.broadcast_to(u_in, (len(part), M, problem.d)).copy()
-            u[:, :, focus] = part[:, None, focus]
-            mu = problem.mean(u.reshape(-1, problem.d), X).reshape(len(part), M, C, -1)
-            log_num[i:i + rows] = special.logsumexp(_log_lik(y[i:i + rows, None], mu, problem.sigma, problem.nu), axis=1)
-        if not upper:
-            log_num = np.logaddexp(log_num, log_true) - math.log(M + 1)
-        else:
-            log_num = log_num - math.log(M)
-    log_evid = log_evid - math.log(M) if upper else np.logaddexp(log_evid, log_true) - math.log(M + 1)
-    terms = log_num - log_evid
-    return terms.mean(axis=0), terms.std(axis=0, ddof=1) / math.sqrt(N)
+            v, log_w = draw(u_out[i:i + rows, focus])
+            R = len(v)
+            mu = problem.mean(v[:, :, :problem.d].reshape(R * M, problem.d), Xe)
+            mu = mu.reshape(R, M, *mu.shape[1:])
+            log_w = np.where(np.isfinite(mu).all(axis=(2, 3)), log_w, -np.inf)
+            ll = _log_lik(y[i:i + rows, None], fold(mu[:, :, :_n_candidates(X)]), sigma, nu) + log_w[..., None]
+            for k, b in enumerate(blocks):
+                num[k, i:i + rows] = special.logsumexp(ll[:, b], axis=1)
+                wsum[k, i:i + rows] = special.logsumexp(log_w[:, b], axis=1)
+                w2sum[k, i:i + rows] = special.logsumexp(2 * log_w[:, b], axis=1)
+
+    def terms(w):
+        """Per outer draw and candidate, the eig and upper terms from the inner blocks w (K,) bool."""
+        m = size[w].sum()
+        tot = special.logsumexp(den[w], axis=0)
+        evidence = np.logaddexp(tot, log_true) - math.log(m + 1), tot - math.log(m)
+        if num is None:
+            return [log_true - e for e in evidence]
+        top = special.logsumexp(wsum[w], axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ess = np.where(np.isfinite(top), np.exp(2 * top - special.logsumexp(w2sum[w], axis=0)), 0.0)[:, None]
+            mean = special.logsumexp(num[w], axis=0) - top[:, None]  # self-normalised
+            # the outer draw is one exact draw of eta | psi_n; the weighted average is worth ess
+            cond = np.where(ess > 0, np.logaddexp(log_true, np.log(np.maximum(ess, 1e-300)) + mean)
+                            - np.log1p(ess), log_true)
+        return [cond - e for e in evidence]
+
+    every = np.ones(K, bool)
+    est, up = terms(every)
+    first = np.arange(K) < K // 2
+    half = 0.5 * (terms(first)[0].mean(axis=0) + terms(~first)[0].mean(axis=0))
+    jack = np.array([[t.mean(axis=0) for t in terms(np.arange(K) != k)] for k in range(K)])  # (K, 2, C)
+    var_jack = (K - 1) / K * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0)  # (2, C)
+    se = [np.sqrt(t.var(axis=0, ddof=1) / N + v) for t, v in zip((est, up), var_jack)]
+    return {"eig": est.mean(axis=0), "eig_se": se[0], "eig_bias": half - est.mean(axis=0),
+            "eig_upper": up.mean(axis=0), "eig_upper_se": se[1]}
 
 
 # ---- Laplace / Fisher information --------------------------------------------------------------
@@ -309,7 +466,8 @@ def laplace_design(problem, X, u_outer, params=None):
 # ---- nested Monte Carlo of a whole batch (Laplace-based importance sampling) ------------------
 def _is_log_evidence(problem, y_n, X, u_fixed, idx, loc, shape, n_inner, df, rng):
     """log of the importance-sampling estimate of the integral of p(y_n | u) p(u_idx | u_rest)
-    over the coordinates ``idx`` (the rest held at ``u_fixed``), with a Student-t proposal."""
+    over the coordinates ``idx`` (the rest held at ``u_fixed``), with a Student-t proposal; and
+    the same from the first half of the draws (for the bias estimate)."""
     shape = 0.5 * (shape + shape.T)
     q = stats.multivariate_t(loc, shape, df=df)
     v = np.asarray(q.rvs(n_inner, random_state=rng), dtype=float).reshape(n_inner, len(idx))
@@ -318,18 +476,24 @@ def _is_log_evidence(problem, y_n, X, u_fixed, idx, loc, shape, n_inner, df, rng
     ll = _log_lik(y_n[None], problem.mean(u, X), problem.sigma, problem.nu).sum(axis=-1)
     log_p = problem.log_density(u)
     log_w = np.where(np.isfinite(log_p) & np.isfinite(ll), ll + log_p - np.atleast_1d(q.logpdf(v)), -np.inf)
-    return special.logsumexp(log_w) - math.log(n_inner)
+    half = max(1, n_inner // 2)
+    return special.logsumexp(log_w) - math.log(n_inner), special.logsumexp(log_w[:half]) - math.log(half)
 
 
 def batch_eig(problem, X, rng, *, params=None, n_outer=200, n_inner=200, df=4.0):
     """EIG of all the points of X measured together, by nested Monte Carlo whose inner draws
     come from a Student-t (``df``) around the Gauss-Newton posterior mean and the Laplace
-    covariance at each outer draw (Beck et al. 2018).  Returns (eig, se) in nats.
+    covariance at each outer draw (Beck et al. 2018).  Returns (eig, se, bias) in nats.
 
     The evidence p(y_n) integrates every coordinate; with ``params`` a subset, p(y_n | psi_n)
     integrates the nuisance coordinates given the outer draw's target values (the proposal's
     conditional, weighted by p(u) / p(psi_n)).  Both estimates are unbiased; their logs are
-    biased by O(1/n_inner), small when the proposal is close to the posterior.
+    biased by O(1/n_inner), small when the proposal is close to the posterior: ``bias`` is the
+    estimate from half the inner draws minus the one from all.  Each outer draw has inner draws
+    of its own, so the outer standard error is the whole Monte Carlo error.  It needs the
+    current distribution's density (``problem.log_density``): exact for a prior file, only the
+    Gaussian approximation for a fit's posterior, where :func:`eig_nmc` with ``batch=True``
+    (the fit's own draws and density) is the estimate to use.
     """
     focus = problem.focus_index(params)
     nuis = np.setdiff1d(np.arange(problem.d), focus)
@@ -345,9 +509,9 @@ def batch_eig(problem, X, rng, *, params=None, n_outer=200, n_inner=200, df=4.0)
     score = np.einsum("nbir,nbr->ni", G, resid / problem.sigma * w)
     centre = u_out + np.einsum("nij,nj->ni", S, score + (problem.loc - u_out) @ P0)
     all_idx = np.arange(d)
-    terms = np.empty(N)
+    terms = np.empty((N, 2))  # all inner draws, half of them
     for n in range(N):
-        log_evid = _is_log_evidence(problem, y[n], X, u_out[n], all_idx, centre[n], S[n], n_inner, df, rng)
+        log_evid = np.array(_is_log_evidence(problem, y[n], X, u_out[n], all_idx, centre[n], S[n], n_inner, df, rng))
         if len(nuis) == 0:
             log_num = _log_lik(y[n], mu[n], problem.sigma, problem.nu).sum()
         else:
@@ -355,10 +519,11 @@ def batch_eig(problem, X, rng, *, params=None, n_outer=200, n_inner=200, df=4.0)
             reg = np.linalg.solve(Sff, Snf.T).T
             loc = centre[n, nuis] + reg @ (u_out[n, focus] - centre[n, focus])
             shape = S[n][np.ix_(nuis, nuis)] - reg @ Snf.T
-            log_num = (_is_log_evidence(problem, y[n], X, u_out[n], nuis, loc, shape, n_inner, df, rng)
+            log_num = (np.array(_is_log_evidence(problem, y[n], X, u_out[n], nuis, loc, shape, n_inner, df, rng))
                        - problem.log_marginal(u_out[n][None], focus)[0])
         terms[n] = log_num - log_evid
-    return float(terms.mean()), float(terms.std(ddof=1) / math.sqrt(N))
+    eig, half = terms.mean(axis=0)
+    return float(eig), float(terms[:, 0].std(ddof=1) / math.sqrt(N)), float(half - eig)
 
 
 # ---- discrimination ------------------------------------------------------------------------------
@@ -490,13 +655,51 @@ def _laplace_log_evidence(problem, X, y, u, iterations=30):
 # ---- models, fits and candidates ---------------------------------------------------------------
 def convert_units(values, unit, target_unit, where, field):
     """``values`` in ``unit`` -> SI, checking that ``unit`` measures what ``target_unit`` (the
-    model card's) does.  The one place design converts units (kept small for a move to pint)."""
-    if unit not in UNITS:
-        raise InputError(where, f"unknown unit {unit!r} (known: {', '.join(UNITS)})", field=field)
-    if target_unit in UNITS and dimension(unit) != dimension(target_unit):
+    model card's) does.  Any unit the data files accept (skinfit.units: SI prefixes such as kN,
+    uN, µN, and whatever pint reads)."""
+    if not isinstance(unit, str):
+        raise InputError(where, f"expected a unit text such as \"mN\" (got {unit!r})", field=field)
+    try:
+        factor = to_si(unit)
+        same = same_dimension(unit, target_unit)
+    except ValueError as exc:
+        raise InputError(where, str(exc), field=field) from None
+    if not same:
         raise InputError(where, f"unit {unit!r} is a {dimension(unit)}, but the model's covariate is in "
                          f"{target_unit!r} (a {dimension(target_unit)})", field=field)
-    return np.asarray(values, dtype=float) * to_si(unit)
+    return np.asarray(values, dtype=float) * factor
+
+
+#: the most candidates a design takes (its arrays grow with outer x candidates; see _check_cost)
+MAX_CANDIDATES = 1_000_000
+_GRID_KEYS = {"unit", "values", "from", "to", "num", "log"}
+
+
+def _grid_axis(spec, where, field):
+    """The values (list of numbers, user unit) of one [grid.<covariate>] table."""
+    if not isinstance(spec, dict):
+        raise InputError(where, f"expected a table with unit and values (or from, to, num) (got {spec!r})", field=field)
+    extra = sorted(set(spec) - _GRID_KEYS)
+    if extra:
+        raise InputError(where, f"unexpected key(s) {', '.join(extra)} (expected unit and values, or unit, from, "
+                         f"to, num and optionally log)", field=field)
+    if "unit" not in spec:
+        raise InputError(where, "expected a unit", field=field)
+    if "values" in spec:
+        if {"from", "to", "num", "log"} & set(spec):
+            raise InputError(where, "give values = [...] or from, to, num, not both", field=field)
+        return _numbers(spec["values"], where, field + ".values")
+    if not {"from", "to", "num"} <= set(spec):
+        raise InputError(where, "expected values = [...] or from, to, num", field=field)
+    num, log = spec["num"], spec.get("log", False)
+    if isinstance(num, bool) or not isinstance(num, int) or not 1 <= num <= MAX_CANDIDATES:
+        raise InputError(where, f"expected an integer from 1 to {MAX_CANDIDATES} (got {num!r})", field=field + ".num")
+    if not isinstance(log, bool):
+        raise InputError(where, f"expected true or false (got {log!r})", field=field + ".log")
+    ends = _numbers([spec["from"], spec["to"]], where, field + ".from/to")
+    if log and not (ends[0] > 0 and ends[1] > 0):
+        raise InputError(where, f"log = true needs from and to > 0 (got {ends[0]:g}, {ends[1]:g})", field=field)
+    return (np.geomspace if log else np.linspace)(ends[0], ends[1], num)
 
 
 def read_candidates(source, model):
@@ -519,7 +722,8 @@ def read_candidates(source, model):
         voltage = 0
 
     Every covariate of the model must be given (optional ones may be left out); values must be
-    finite and, for forces, lengths, voltages and the like, >= 0.
+    finite and, for forces, lengths, voltages and the like, >= 0; at most
+    :data:`MAX_CANDIDATES` candidates.  Units: any the data files accept (:mod:`skinfit.units`).
     """
     where = str(source) if not isinstance(source, dict) else "candidates"
     if isinstance(source, dict):
@@ -535,77 +739,109 @@ def read_candidates(source, model):
     columns, units = {}, {}
     if "grid" in doc and "points" in doc:
         raise InputError(where, "give either [grid.<covariate>] tables or [[points]], not both")
+    extra = sorted(set(doc) - {"grid", "points", "units"})
+    if extra:
+        raise InputError(where, f"unexpected key(s) {', '.join(extra)} (expected [grid.<covariate>] tables, or "
+                         f"[units] and [[points]])")
     if "grid" in doc:
+        if not isinstance(doc["grid"], dict) or not doc["grid"]:
+            raise InputError(where, "expected one [grid.<covariate>] table per covariate", field="grid")
+        if "units" in doc:
+            raise InputError(where, "a grid gives each covariate's unit in its own table, not under [units]",
+                             field="units")
         for name, spec in doc["grid"].items():
             field = f"grid.{name}"
             if name not in cards:
                 raise InputError(where, f"unknown covariate {name!r} of model {model.id!r} (covariates: "
                                  f"{', '.join(cards)})", field=field)
-            if not isinstance(spec, dict) or "unit" not in spec:
-                raise InputError(where, "expected a table with unit and values (or from, to, num)", field=field)
-            if "values" in spec:
-                raw = spec["values"]
-            elif {"from", "to", "num"} <= set(spec):
-                if not (isinstance(spec["num"], int) and spec["num"] >= 1):
-                    raise InputError(where, f"num must be an integer >= 1 (got {spec['num']!r})", field=field + ".num")
-                space = np.geomspace if spec.get("log", False) else np.linspace
-                try:
-                    raw = space(float(spec["from"]), float(spec["to"]), spec["num"]).tolist()
-                except (TypeError, ValueError) as exc:
-                    raise InputError(where, f"bad range ({exc})", field=field) from None
-            else:
-                raise InputError(where, "expected values = [...] or from, to, num", field=field)
-            columns[name] = _numbers(raw, where, field + ".values")
+            columns[name] = _grid_axis(spec, where, field)
             units[name] = spec["unit"]
+        size = math.prod(len(v) for v in columns.values())
+        if size > MAX_CANDIDATES:
+            raise InputError(where, f"the grid has {size:,} candidates ({' x '.join(str(len(v)) for v in columns.values())}); "
+                             f"at most {MAX_CANDIDATES:,}: use fewer values", field="grid")
         names = list(columns)
         grids = np.meshgrid(*[np.asarray(columns[k]) for k in names], indexing="ij")
         columns = {k: g.ravel() for k, g in zip(names, grids)}
     elif "points" in doc:
-        units = dict(doc.get("units", {}))
+        units = doc.get("units", {})
+        if not isinstance(units, dict):
+            raise InputError(where, f"expected a table covariate = \"unit\" (got {units!r})", field="units")
         points = doc["points"]
         if not isinstance(points, list) or not points:
             raise InputError(where, "expected at least one [[points]] entry", field="points")
+        if len(points) > MAX_CANDIDATES:
+            raise InputError(where, f"{len(points):,} points; at most {MAX_CANDIDATES:,}", field="points")
         for i, pt in enumerate(points, 1):
+            if not isinstance(pt, dict):
+                raise InputError(where, f"expected a table covariate = value (got {pt!r})", field="points", row=i)
             for name in pt:
                 if name not in cards:
                     raise InputError(where, f"unknown covariate {name!r} of model {model.id!r} (covariates: "
                                      f"{', '.join(cards)})", field="points", row=i)
-        for name in {k for pt in points for k in pt}:
+        for name in units:
+            if name not in cards:
+                raise InputError(where, f"unknown covariate {name!r} of model {model.id!r}", field=f"units.{name}")
+        for name in [c for c in cards if any(c in pt for pt in points)]:
             if name not in units:
                 raise InputError(where, f"no unit for {name!r}: add it under [units]", field="units")
             missing = [i for i, pt in enumerate(points, 1) if name not in pt]
             if missing:
                 raise InputError(where, f"covariate {name!r} missing", field="points", row=missing[0])
             columns[name] = _numbers([pt[name] for pt in points], where, f"points.{name}")
-        for name in units:
-            if name not in cards:
-                raise InputError(where, f"unknown covariate {name!r} of model {model.id!r}", field=f"units.{name}")
     else:
         raise InputError(where, "expected [grid.<covariate>] tables or [[points]] entries")
+    fields = {name: f"grid.{name}.unit" if "grid" in doc else f"units.{name}" for name in columns}
+    return _candidate_columns(columns, units, model, where, fields)
+
+
+def _candidate_columns(columns, units, model, where, fields):
+    """Check and convert candidate columns (user units) to SI: (X, units), optional covariates
+    left out filled with NaN (missing by design)."""
     missing = [c.name for c in model.covariates if c.name not in columns and not c.optional]
     if missing:
         raise InputError(where, f"no candidate values for covariate(s) {', '.join(missing)} of model "
-                         f"{model.id!r}", field="grid" if "grid" in doc else "points")
+                         f"{model.id!r}")
+    cards = {c.name: c for c in model.covariates}
     X = {}
     for name, values in columns.items():
-        field = f"grid.{name}.unit" if "grid" in doc else f"units.{name}"
-        X[name] = convert_units(values, units[name], cards[name].unit, where, field)
-        dim = dimension(units[name])
-        from .units import NONNEGATIVE
-
-        if dim in NONNEGATIVE and (X[name] < 0).any():
-            raise InputError(where, f"{name} must be >= 0 (got {float(np.min(values)):g} {units[name]})", field=field)
+        X[name] = convert_units(values, units[name], cards[name].unit, where, fields[name])
+        if dimension(units[name]) in NONNEGATIVE and (X[name] < 0).any():
+            raise InputError(where, f"{name} must be >= 0 (got {float(np.min(values)):g} {units[name]})",
+                             field=fields[name])
+    size = len(next(iter(X.values())))
     for c in model.covariates:
         if c.name not in X:  # optional covariate left out: missing by design
-            X[c.name] = np.full(len(next(iter(X.values()))), np.nan)
-    return X, units
+            X[c.name] = np.full(size, np.nan)
+    return X, dict(units)
 
 
-def _numbers(raw, where, field):
+def _si_candidates(table, model):
+    """Candidates given as a mapping (or DataFrame) covariate -> SI values: checked as a file's."""
+    cards = {c.name: c for c in model.covariates}
+    columns = {}
+    for name, values in dict(table).items():
+        if name not in cards:
+            raise InputError("candidates", f"unknown covariate {name!r} of model {model.id!r} (covariates: "
+                             f"{', '.join(cards)})", field=str(name))
+        values = np.asarray(values, dtype=object).ravel().tolist()
+        if len(values) > MAX_CANDIDATES:
+            raise InputError("candidates", f"{len(values):,} candidates; at most {MAX_CANDIDATES:,}", field=name)
+        columns[name] = _numbers(values, "candidates", name, allow_nan=cards[name].optional)
+    sizes = {len(v) for v in columns.values()}
+    if len(sizes) > 1:
+        raise InputError("candidates", f"the covariates have different lengths "
+                         f"({', '.join(f'{k}: {len(v)}' for k, v in columns.items())})")
+    return _candidate_columns(columns, {k: cards[k].unit for k in columns}, model, "candidates",
+                              {k: k for k in columns})
+
+
+def _numbers(raw, where, field, allow_nan=False):
     if not isinstance(raw, list) or not raw:
         raise InputError(where, f"expected a non-empty list of numbers (got {raw!r})", field=field)
     for i, v in enumerate(raw, 1):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) or \
+                not (math.isfinite(v) or (allow_nan and math.isnan(v))):
             raise InputError(where, f"expected a finite number (got {v!r})", field=field, row=i)
     return np.asarray(raw, dtype=float)
 
@@ -665,8 +901,34 @@ def _prior_problem(model, priors, rng, n_draws, noise, sigma, constants=None):
             total += priors[names[j]].logpdf(theta) + (u[:, j] if is_log[j] else 0.0)
         return total
 
-    return _model_problem(model, draws, is_log, noise, sigma, constants,
-                          lambda u: log_marginal(u, np.arange(len(names))), log_marginal)
+    problem = _model_problem(model, draws, is_log, noise, sigma, constants,
+                             lambda u: log_marginal(u, np.arange(len(names))), log_marginal)
+    # independent by construction: nuisance given the targets is a plain swap (B = 0 exactly)
+    return replace(problem, base_cov=np.diag(np.diag(problem.cov)))
+
+
+def _fit_density(post, names, theta):
+    """A fit's posterior for :func:`eig_nmc`'s conditional draws: ``log_joint`` (its log
+    density, prior times likelihood of its data, unnormalised, in v = (u of ``names``, the other
+    slots: noise parameters, log where their prior is positive), Jacobian included) and the
+    draws' extra coordinates ``extra_draws`` (D, e); ``theta`` (D, slots) natural, slot order."""
+    slots = [s.name for s in post.slots]
+    order = [slots.index(n) for n in names] + [j for j, n in enumerate(slots) if n not in names]
+    is_log = np.array([post.priors[slots[j]].lower > 0 for j in order])
+
+    def log_joint(v):
+        v = np.atleast_2d(v)
+        theta_v = np.where(is_log, np.exp(np.where(is_log, v, 0.0)), v)
+        natural = np.empty_like(theta_v)
+        natural[:, order] = theta_v
+        out = post.log_prior(natural)
+        inside = np.isfinite(out)
+        if inside.any():
+            out[inside] += post.log_likelihood(natural[inside])
+        return out + (v * is_log).sum(axis=1)
+
+    extra = _to_u(theta[:, order], is_log)[:, len(names):]
+    return {"log_joint": log_joint, "extra_draws": extra if extra.shape[1] else None}
 
 
 def _gaussian_density(loc, cov):
@@ -711,12 +973,14 @@ def _noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None):
 class DesignResult:
     """What :func:`design` found.
 
-    ``table``: one row per candidate (covariates in the user's units), ``eig`` and ``eig_se``
-    (nats, nested Monte Carlo, one measurement), ``eig_laplace`` (the approximation), ``in_plan``
-    (times the plan uses it).  ``plan``: the n measurements to run, user units, in the order
+    ``table``: one row per candidate (covariates in the user's units); the expected
+    information gain of one measurement there, nats, by nested Monte Carlo (:func:`eig_nmc`):
+    ``eig`` (the value to read), ``eig_se`` (its Monte Carlo error), ``eig_bias`` (its
+    estimated bias), ``eig_upper`` and ``eig_upper_se`` (an upper bound); ``eig_laplace`` (the
+    Laplace approximation the plan is chosen on), ``in_plan`` (times the plan uses it).  ``plan``: the n measurements to run, user units, in the order
     chosen.  ``comparison``: plan vs baseline (EIG of the whole batch by nested Monte Carlo with
-    its error, Laplace EIG; with ``discriminate``, expected ln BF and P(ln BF > 3)).  ``sd``:
-    per target parameter, the sd now and predicted after the plan and after the baseline, in
+    its error and estimated bias, Laplace EIG; with ``discriminate``, expected ln BF and
+    P(ln BF > 3)).  ``sd``: per target parameter, the sd now and predicted after the plan and after the baseline, in
     the coordinate u (``log`` = sd of the natural log, i.e. a relative sd).  ``settings``: the
     estimators, draw counts, noise, seed and what was dropped.
     """
@@ -739,10 +1003,23 @@ class DesignResult:
                  f"starting from {self.settings['start']}; targets: {', '.join(self.settings['params'])}; "
                  f"seed {self.settings['seed']}", "", "plan vs baseline:", self.comparison.to_string(), "",
                  "predicted posterior sd (coordinate: log = sd of the natural log):", self.sd.to_string(), "",
-                 "plan (user units):", self.plan.to_string(index=False)]
+                 "plan (user units):", self.plan.to_string(index=False), "", *self._single_lines()]
         if self.discrimination is not None:
             lines += ["", "discrimination (per generating model):", self.discrimination.to_string(index=False)]
         return "\n".join(lines)
+
+    def _single_lines(self):
+        """The EIG of one measurement: which column to read, the best candidates, the bias."""
+        t = self.table
+        covs = [c for c in t.columns if c.endswith("]")]
+        best = t.sort_values("eig", ascending=False).head(5)[covs + ["eig", "eig_se", "eig_bias", "eig_upper"]]
+        lines = ["one measurement (candidates.csv): read eig +- eig_se (nats); eig_bias is its estimated Monte "
+                 "Carlo bias, eig_upper an upper bound. Best candidates:", best.to_string(index=False)]
+        over = self.settings.get("eig_bias_over_se", 0)
+        if over:
+            lines.append(f"warning: at {over} of {len(t)} candidates the estimated bias of eig exceeds its se "
+                         f"(the EIG nears log of the inner draws): rerun with more inner draws (--inner)")
+        return lines
 
     def write(self, out):
         """plan.csv (ready to run), candidates.csv, baseline.csv, comparison.csv, sd.csv,
@@ -776,7 +1053,14 @@ def _baseline_design(model, fit, baseline, n, units):
     if baseline is None and fit is not None:
         x, label = fit.posterior.x, f"fit's dataset {fit.dataset_id}"
     else:
-        ds = load_dataset(baseline) if baseline is not None else design_dataset(model)
+        try:
+            ds = load_dataset(baseline) if baseline is not None else design_dataset(model)
+        except InputError as exc:
+            if baseline is not None or exc.field != "dataset":
+                raise
+            raise InputError(f"model {model.id}", "no shipped dataset for this model or its variants to take the "
+                             "baseline design from: give one with --baseline DATASET (baseline= in Python), a "
+                             "dataset id or path", field="baseline") from None
         missing = [c.name for c in model.covariates if c.name not in ds.frame.columns and not c.optional]
         if missing:
             raise InputError(ds.path, f"baseline dataset has no covariate {missing[0]!r} of model {model.id!r}")
@@ -786,6 +1070,117 @@ def _baseline_design(model, fit, baseline, n, units):
     rows = len(next(iter(x.values())))
     idx = np.unique(np.linspace(0, rows - 1, min(n, rows)).round().astype(int))
     return {k: np.asarray(v, float)[idx] for k, v in x.items()}, f"{label}: {len(idx)} of {rows} rows, evenly spaced"
+
+
+#: fewest outer / inner / batch draws an estimate takes (its standard error needs a sample, its
+#: bias estimate halves of the inner draws)
+MIN_DRAWS = 20
+#: a design refuses, before any work, to need more memory for its largest arrays (bytes) or an
+#: estimated longer time (seconds) than this
+MAX_BYTES, MAX_SECONDS = 4 * 2**30, 3600.0
+_COUNT_NAMES = {"n": "--n", "n_outer": "--outer", "n_inner": "--inner", "n_batch": "n_batch", "n_draws": "n_draws"}
+
+
+def _check_counts(**counts):
+    """Each count an integer (not a bool): ``n`` >= 1, draw counts >= MIN_DRAWS, and the
+    outer plus inner draws at most ``n_draws`` (they are taken from them without repeats)."""
+    for key, value in counts.items():
+        low = 1 if key == "n" else 5 * MIN_DRAWS if key == "n_draws" else MIN_DRAWS
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            what = "the number of measurements" if key == "n" else "the number of draws"
+            raise InputError(_COUNT_NAMES[key], f"{what} must be an integer >= {low} (got {value!r})")
+    if counts["n_outer"] + counts["n_inner"] > counts["n_draws"] or counts["n_batch"] > counts["n_draws"]:
+        raise InputError("n_draws", f"{counts['n_draws']} draws cannot give {counts['n_outer']} outer and "
+                         f"{counts['n_inner']} inner ones (nor {counts['n_batch']} batch ones): raise n_draws")
+
+
+def _check_params(params, model):
+    """Target parameters: None (all), a name or a list of distinct names of ``model``."""
+    names = model.parameter_names
+    if params is None:
+        return None
+    params = [params] if isinstance(params, str) else params
+    if not isinstance(params, (list, tuple)) or not params or not all(isinstance(p, str) for p in params):
+        raise InputError("--params", f"expected parameter names of model {model.id!r} (got {params!r})")
+    bad = [p for p in params if p not in names]
+    if bad:
+        raise InputError("--params", f"unknown parameter {bad[0]!r} of model {model.id!r} "
+                         f"(parameters: {', '.join(names)})")
+    twice = sorted({p for p in params if params.count(p) > 1})
+    if twice:
+        raise InputError("--params", f"parameter {twice[0]!r} given twice")
+    return list(params)
+
+
+def _check_discriminate(discriminate, model):
+    """Competing models: a model id or Model, or a list of them, none of them ``model`` itself."""
+    from .models import Model
+
+    items = [discriminate] if isinstance(discriminate, (str, Model)) else discriminate
+    if not isinstance(items, (list, tuple)) or not all(isinstance(m, (str, Model)) for m in items):
+        raise InputError("--discriminate", f"expected model ids (got {discriminate!r})")
+    ids = [m.id if isinstance(m, Model) else m for m in items]
+    if model.id in ids:
+        raise InputError("--discriminate", f"{model.id!r} is the model being designed for: name its competitors")
+    twice = sorted({m for m in ids if ids.count(m) > 1})
+    if twice:
+        raise InputError("--discriminate", f"model {twice[0]!r} given twice")
+    return list(items)
+
+
+def _check_noise_scale(noise_scale, model):
+    """None, a noise sd > 0, or a mapping observable -> sd > 0 over the model's observables."""
+    obs = model.observable_names
+    given = noise_scale if isinstance(noise_scale, Mapping) else {o: noise_scale for o in obs}
+    unknown = [k for k in given if k not in obs]
+    if unknown:
+        raise InputError("--sigma", f"unknown observable {unknown[0]!r} of model {model.id!r} "
+                         f"(observables: {', '.join(obs)})")
+    for o, v in given.items():
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or \
+                not (math.isfinite(v) and v > 0):
+            raise InputError("--sigma", f"noise sd of {o} must be a number > 0 (got {v!r})")
+
+
+def _check_cost(problem, X, x_base, *, n, n_outer, n_inner, n_batch, params, fit, discriminate, rows):
+    """Refuse, before the work starts, a design whose largest arrays need more than
+    :data:`MAX_BYTES` or whose estimated time exceeds :data:`MAX_SECONDS`, with the estimate and
+    what to reduce.  The forward model's cost per (parameter vector x point) is timed here on a
+    small block; the other constants are this code's, measured in bench/results/design.md."""
+    import time
+
+    C, B = _n_candidates(X), n + _n_candidates(x_base)
+    d, r = problem.d, len(problem.sigma)
+    N, M = n_outer, n_inner
+    subset = params is not None and len(params) < d
+    K = 10
+    sample = problem.draws[:32]
+    Xs = _take_x(X, np.arange(min(C, 64)))
+    t = time.perf_counter()
+    problem.mean(sample, Xs)
+    forward = (time.perf_counter() - t) / (len(sample) * _n_candidates(Xs))
+    likelihood, greedy = 5e-8, 2e-6 * (d / 7) ** 2  # s per cell; s per (step x outer draw x candidate)
+    seconds = {
+        "support": len(problem.draws) * (C + _n_candidates(x_base)) * forward,
+        "one measurement": N * M * C * r * likelihood * (2 if subset else 1)
+        + (N * M * (C + rows) * forward if subset else 0.0),
+        "plan": n * n_batch * C * greedy + 2 * d * n_batch * C * forward
+        + (len(discriminate) + 1) ** 2 * n * min(N, 150) * M * C * likelihood,
+        "batch": 2 * (N * M * B * r * likelihood + (N * M * (B + rows) * forward if subset else 0.0)
+                      if fit is not None else n_batch * n_batch * B * forward * (2 if subset else 1)),
+    }
+    total = sum(seconds.values())
+    memory = 8 * max(N * C * (K * (2 if subset else 1) + 2 * r) + M * C * r, 2 * d * n_batch * C * r * 3,
+                     (len(discriminate) + 1) * (N + M) * C * r * 3)
+    if memory > MAX_BYTES or total > MAX_SECONDS:
+        worst = max(seconds, key=seconds.get)
+        raise InputError("design", f"too big: {C:,} candidates, --n {n}, {N} outer x {M} inner draws would need "
+                         f"about {memory / 2**30:.1f} GiB and {total / 60:.0f} min (most for {worst}); the limits are "
+                         f"{MAX_BYTES / 2**30:.0f} GiB and {MAX_SECONDS / 60:.0f} min: use fewer candidates, a smaller "
+                         f"--n or fewer --outer/--inner draws")
+    return total
 
 
 def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapping, n: int = 24,
@@ -828,8 +1223,10 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     from .priors import load_priors
 
     t0 = time.perf_counter()
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n <= 0:
-        raise InputError("--n", f"the number of measurements must be an integer > 0 (got {n!r})")
+    _check_counts(n=n, n_outer=n_outer, n_inner=n_inner, n_batch=n_batch, n_draws=n_draws)
+    if isinstance(rng, bool) or not (rng is None or isinstance(rng, (int, np.integer, np.random.Generator))) \
+            or (isinstance(rng, (int, np.integer)) and rng < 0):
+        raise InputError("--seed", f"expected an integer seed >= 0, None or a numpy Generator (got {rng!r})")
     seed = int(rng) if isinstance(rng, (int, np.integer)) else None
     rng = as_generator(rng)
     fit = fit_or_model if isinstance(fit_or_model, Fit) else None
@@ -842,23 +1239,26 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
         priors = post.priors
         noise_kinds = dict(post.noise)
     else:
+        if not isinstance(fit_or_model, (Model, str, os.PathLike)):
+            raise InputError("fit_or_model", f"expected a Fit, a Model or a model id (got "
+                             f"{type(fit_or_model).__name__})")
         model = fit_or_model if isinstance(fit_or_model, Model) else load_model(fit_or_model)
         priors = load_priors(model.id)
         noise_kinds = {o.name: o.noise for o in model.observables}
     names = model.parameter_names
-    if params is not None:
-        params = [params] if isinstance(params, str) else list(params)
-        bad = [p for p in params if p not in names]
-        if bad or not params:
-            raise InputError("--params", f"unknown parameter {bad[0] if bad else ''!r} of model {model.id!r} "
-                             f"(parameters: {', '.join(names)})")
+    params = _check_params(params, model)
+    discriminate = _check_discriminate(discriminate, model)
+    _check_noise_scale(noise_scale, model)
+    if baseline is not None and not isinstance(baseline, (str, os.PathLike)):
+        raise InputError("--baseline", f"expected a dataset id or path (got {type(baseline).__name__})")
     targets = list(names) if params is None else params
-    if isinstance(candidates, (pd.DataFrame,)) or (isinstance(candidates, dict) and not
-                                                   ({"grid", "points"} & set(candidates))):
-        X = {k: np.asarray(v, float) for k, v in dict(candidates).items()}
-        units = {k: next(c.unit for c in model.covariates if c.name == k) for k in X}
-    else:
+    if isinstance(candidates, dict) and {"grid", "points"} & set(candidates) or isinstance(candidates, (str, os.PathLike)):
         X, units = read_candidates(candidates, model)
+    elif isinstance(candidates, (pd.DataFrame, Mapping)):
+        X, units = _si_candidates(candidates, model)
+    else:
+        raise InputError("--candidates", f"expected a candidates file, its mapping or a table of SI covariates "
+                         f"(got {type(candidates).__name__})")
     C = _n_candidates(X)
     x_base, base_label = _baseline_design(model, fit, baseline, n, units)
     for k in X:
@@ -878,16 +1278,21 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
         loc, cov = u.mean(axis=0), np.atleast_2d(np.cov(u, rowvar=False))
         dens, marg = _gaussian_density(loc, cov)
         problem = _model_problem(model, draws, is_log, noise, sigma, post.constants, dens, marg, loc, cov)
+        problem = replace(problem, **_fit_density(post, names, theta))
         start = f"the posterior of fit {fit.model_id} on {fit.dataset_id} ({len(draws)} draws)"
     else:
         noise, sigma = _noise_setup(model, priors, noise_kinds, noise_scale)
         problem = _prior_problem(model, priors, rng, n_draws, noise, sigma)
         start = f"the priors {priors.path or priors.id} ({n_draws} draws)"
-    problem, dropped = _restrict_to_support(problem, [X, x_base], gaussian=fit is not None)
+    estimate = _check_cost(problem, X, x_base, n=n, n_outer=min(n_outer, len(problem.draws) // 2),
+                           n_inner=n_inner, n_batch=n_batch, params=params, fit=fit, discriminate=discriminate,
+                           rows=fit.posterior.n if fit is not None else 0)
+    problem, dropped = _restrict_to_support(problem, [X, x_base])
     focus = problem.focus_index(targets)
+    n_out = min(n_outer, len(problem.draws) // 2)  # what eig_nmc takes of the draws left
+    n_in = min(n_inner, len(problem.draws) - n_out)
 
-    eig, eig_se = eig_nmc(problem, X, rng, params=params, n_outer=n_outer, n_inner=n_inner)
-    eig_up, eig_up_se = eig_nmc(problem, X, rng, params=params, n_outer=n_outer, n_inner=n_inner, upper=True)
+    single_nmc = eig_nmc(problem, X, rng, params=params, n_outer=n_outer, n_inner=n_inner)
     disc_table = None
     if discriminate:
         from dataclasses import replace as _replace
@@ -931,9 +1336,14 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     rows = {}
     sds = {}
     for label, Xd in (("plan", X_plan), ("baseline", x_base)):
-        e, se = batch_eig(problem, Xd, rng, params=params, n_outer=n_batch, n_inner=n_batch)
+        if fit is None:  # the prior's density is exact: Laplace-based importance sampling
+            e, se, bias = batch_eig(problem, Xd, rng, params=params, n_outer=n_batch, n_inner=n_batch)
+        else:  # the posterior's own draws and density (its Gaussian approximation can be far off)
+            got = eig_nmc(problem, Xd, rng, params=params, n_outer=n_outer, n_inner=n_inner, batch=True)
+            e, se, bias = (float(got[k][0]) for k in ("eig", "eig_se", "eig_bias"))
         e_lap, sd = laplace_design(problem, Xd, u_outer, params)
-        rows[label] = {"n": _n_candidates(Xd), "eig_nmc": e, "eig_nmc_se": se, "eig_laplace": e_lap}
+        rows[label] = {"n": _n_candidates(Xd), "eig_nmc": e, "eig_nmc_se": se, "eig_nmc_bias": bias,
+                       "eig_laplace": e_lap}
         sds[label] = sd
     if disc_table is not None:
         for label in rows:
@@ -949,10 +1359,8 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     sd["plan/baseline"] = sd["plan"] / sd["baseline"]
     covs = [c.name for c in model.covariates if c.name in units and not np.all(np.isnan(X[c.name]))]
     table = _user_frame(X, units, np.arange(C), covs)
-    table["eig"] = eig
-    table["eig_se"] = eig_se
-    table["eig_upper"] = eig_up
-    table["eig_upper_se"] = eig_up_se
+    for key, value in single_nmc.items():
+        table[key] = value
     table["eig_laplace"] = single
     table["in_plan"] = np.bincount(idx, minlength=C)
     plan = _user_frame(X, units, idx, covs)
@@ -960,54 +1368,64 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     if not discriminate:
         plan["laplace_gain"] = gains
     baseline_frame = _user_frame(x_base, units, np.arange(_n_candidates(x_base)), covs)
+    over = int(np.sum(np.abs(table["eig_bias"]) > table["eig_se"]))
+    nuisance = ("none (all parameters are targets)" if len(focus) == problem.d else
+                "drawn from their priors (independent of the targets)" if fit is None else
+                "drawn given the targets, weighted by the fit's posterior density")
     settings = {"model": model.id, "start": start, "params": targets, "n": int(n), "seed": seed,
                 "selection": selection,
-                "eig_single": f"nested Monte Carlo (Ryan 2003; Rainforth et al. 2018), {n_outer} outer x "
-                              f"{n_inner} inner draws shared by all candidates; eig with the outer draw among the "
-                              f"inner ones (lower bound, Foster et al. 2019), eig_upper without (upper bound); "
-                              f"se = outer standard error",
-                "eig_batch": f"nested Monte Carlo with Laplace-based importance sampling (Beck et al. 2018), "
-                             f"{n_batch} outer x {n_batch} inner draws",
+                "eig_single": f"nested Monte Carlo (Ryan 2003; Rainforth et al. 2018), {n_out} outer x "
+                              f"{n_in} inner draws shared by all candidates; read eig (the outer draw among the "
+                              f"inner ones, Foster et al. 2019; about all parameters a lower bound) +- eig_se "
+                              f"(outer draws plus a jackknife over blocks of inner draws), eig_bias its estimated "
+                              f"bias (half the inner draws vs all); eig_upper an upper bound (Ryan 2003); "
+                              f"nuisance parameters {nuisance}",
+                "eig_batch": (f"nested Monte Carlo with Laplace-based importance sampling (Beck et al. 2018), "
+                              f"{n_batch} outer x {n_batch} inner draws" if fit is None else
+                              f"nested Monte Carlo over the fit's posterior draws, {n_out} outer x {n_in} "
+                              f"inner, as for one measurement"),
+                "eig_bias_over_se": int(over),
                 "laplace": "approximate: Gaussian current distribution in u, Fisher information at each outer draw",
                 "noise": {o: {"model": k, "scale": float(s), **({"nu": v} if math.isfinite(v) else {})}
                           for (o, (k, v)), s in zip(noise.items(), sigma)},
                 "baseline": base_label, "discriminate": list(discriminate),
-                "draws_dropped_outside_support": dropped, "candidates": C, "seconds": time.perf_counter() - t0}
+                "draws_dropped_outside_support": dropped, "candidates": C, "estimated_seconds": round(estimate, 1),
+                "seconds": time.perf_counter() - t0}
     plot = {"x": model.plot.get("x") if model.plot.get("x") in covs else (covs[0] if covs else None),
             "xscale": model.plot.get("xscale", "linear")}
     return DesignResult(model.id, tuple(covs), units, table, plan, baseline_frame, comparison, sd, settings,
                         disc_table, plot)
 
 
-def _restrict_to_support(problem, designs, gaussian=False):
+def _restrict_to_support(problem, designs, chunk=None):
     """Condition the current distribution on predictions inside the physical support at every
-    point of ``designs``: draws outside are dropped, the Gaussian approximation is refitted to
-    the rest and the densities for importance sampling become the restricted ones, p(u) 1[valid]
-    / Z with Z the kept fraction (a refitted Gaussian when ``gaussian``, for a fit's posterior).
-    The marginal of a target subset psi picks up P(valid | psi) / Z, estimated over the kept
-    fraction of the draws' nuisance values.  Returns (problem, number dropped)."""
-    from dataclasses import replace
-
+    point of ``designs``: draws outside are dropped, the Gaussian approximation (loc, cov) is
+    refitted to the rest, and the densities for importance sampling become the restricted ones,
+    p(u) 1[valid] / Z, Z the kept fraction of the draws.  The marginal of a target subset psi
+    picks up P(valid | psi) / Z, P(valid | psi) over 200 draws of the nuisance coordinates given
+    psi (:func:`conditional_gain`).  The unrestricted draws and covariance are kept for the
+    conditional draws of :func:`eig_nmc`.  Returns (problem, number dropped)."""
     X_all = {k: np.concatenate([np.asarray(X[k], float) for X in designs]) for k in designs[0]}
+    chunk = chunk or max(1, _CELLS // max(_n_candidates(X_all), 1))
 
     def valid(u):
-        return np.isfinite(problem.mean(np.atleast_2d(u), X_all)).all(axis=(1, 2))
+        u = np.atleast_2d(u)
+        return np.concatenate([np.isfinite(problem.mean(u[i:i + chunk], X_all)).all(axis=(1, 2))
+                               for i in range(0, len(u), chunk)]) if len(u) else np.zeros(0, bool)
 
     ok = valid(problem.draws)
     if ok.sum() < 50:
         raise InputError("candidates", f"only {int(ok.sum())} of {len(ok)} parameter draws give predictions inside "
                          f"the model's physical support at every candidate: narrow the candidate range")
+    base_cov = np.atleast_2d(problem.cov if problem.base_cov is None else problem.base_cov)
+    keep = dict(base_draws=problem.draws, in_support=ok, support=X_all, base_cov=base_cov)
     if ok.all():
-        return problem, 0
+        return replace(problem, **keep), 0
     draws = problem.draws[ok]
     loc, cov = draws.mean(axis=0), np.atleast_2d(np.cov(draws, rowvar=False))
     log_z = math.log(ok.mean())
-    if gaussian:
-        base, base_marginal = _gaussian_density(loc, cov)
-        log_z = 0.0
-    else:
-        base, base_marginal = problem.log_density, problem.log_marginal
-    all_draws = problem.draws
+    base, base_marginal = problem.log_density, problem.log_marginal
+    sample = problem.draws[:200]
 
     def log_density(u):
         u = np.atleast_2d(u)
@@ -1015,17 +1433,20 @@ def _restrict_to_support(problem, designs, gaussian=False):
 
     def log_marginal(u, idx):
         u = np.atleast_2d(u)
+        idx = np.atleast_1d(idx)
+        nuis = np.setdiff1d(np.arange(problem.d), idx)
+        gain = conditional_gain(base_cov, idx)
         out = base_marginal(u, idx) - log_z
-        sample = all_draws[:200]
         for i, row in enumerate(u):
-            swapped = sample.copy()
-            swapped[:, idx] = row[idx]
-            frac = valid(swapped).mean()
+            given = sample.copy()
+            given[:, nuis] += (row[idx] - sample[:, idx]) @ gain.T
+            given[:, idx] = row[idx]
+            frac = valid(given).mean()
             out[i] += math.log(frac) if frac > 0 else -np.inf
         return out
 
-    return replace(problem, draws=draws, loc=loc, cov=cov, log_density=log_density,
-                   log_marginal=log_marginal), int((~ok).sum())
+    return replace(problem, draws=draws, loc=loc, cov=cov, log_density=log_density, log_marginal=log_marginal,
+                   **keep), int((~ok).sum())
 
 
 # ---- figure, report section, command line -------------------------------------------------------
@@ -1118,6 +1539,13 @@ def cli_design(args):
 
     if args.n <= 0:
         raise InputError("--n", f"the number of measurements must be > 0 (got {args.n})")
+    if args.out:  # refused before the work, not after it
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise InputError("--out", f"{out} is a file, not a folder")
+        parent = next(p for p in (out, *out.parents) if p.exists())
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise InputError("--out", f"cannot write into {parent}")
     params = [p.strip() for p in args.params.split(",")] if args.params else None
     if args.from_fit:
         source = load_fit(args.from_fit)

@@ -40,9 +40,10 @@ def test_nested_mc_eig_of_one_measurement_matches_linear_gaussian_closed_form(rn
     rows = rng.normal(size=(6, 3))
     X = {f"x{j}": rows[:, j] for j in range(3)}
     exact = np.array([_closed_form(r[None], COV)[0] for r in rows])
-    for upper in (False, True):  # the lower (outer draw included) and upper (Ryan 2003) estimates
-        eig, se = eig_nmc(problem, X, rng, n_outer=1500, n_inner=1500, upper=upper)
-        assert np.all(np.abs(eig - exact) < 4 * se), (upper, eig, exact, se)
+    got = eig_nmc(problem, X, rng, n_outer=1500, n_inner=1500)
+    for key in ("eig", "eig_upper"):  # the estimate (outer draw included) and the upper bound (Ryan 2003)
+        eig, se = got[key], got[key + "_se"]
+        assert np.all(np.abs(eig - exact) < 4 * se + np.abs(got["eig_bias"])), (key, eig, exact, se)
         assert np.all(se < 0.03)
 
 
@@ -52,8 +53,8 @@ def test_nested_mc_eig_of_a_subset_matches_closed_form_with_independent_prior(rn
     rows = rng.normal(size=(4, 3))
     X = {f"x{j}": rows[:, j] for j in range(3)}
     exact = np.array([_closed_form(r[None], cov, focus=[0, 1])[0] for r in rows])
-    eig, se = eig_nmc(problem, X, rng, params=["u0", "u1"], n_outer=800, n_inner=800)
-    assert np.all(np.abs(eig - exact) < 4 * se), (eig, exact, se)
+    got = eig_nmc(problem, X, rng, params=["u0", "u1"], n_outer=800, n_inner=800)
+    assert np.all(np.abs(got["eig"] - exact) < 4 * got["eig_se"] + np.abs(got["eig_bias"])), (got, exact)
 
 
 @pytest.mark.parametrize("idx,focus", [([0, 1, 2, 3, 3], None), ([1, 1, 1], None), ([0, 2, 4, 5], [0, 1]),
@@ -64,8 +65,8 @@ def test_batch_eig_matches_linear_gaussian_closed_form(rng, idx, focus):
     X = {f"x{j}": rows[:, j] for j in range(3)}
     params = None if focus is None else [f"u{j}" for j in focus]
     exact, S = _closed_form(rows, COV, focus=focus)
-    eig, se = batch_eig(problem, X, rng, params=params, n_outer=300, n_inner=200)
-    assert abs(eig - exact) < 4 * se, (eig, exact, se)
+    eig, se, bias = batch_eig(problem, X, rng, params=params, n_outer=300, n_inner=200)
+    assert abs(eig - exact) < 4 * se + abs(bias), (eig, exact, se, bias)
     lap, sd = laplace_design(problem, X, problem.draws[:20], params)  # exact for a linear model
     assert lap == pytest.approx(exact, rel=1e-6)
     assert sd == pytest.approx(np.sqrt(np.diag(S)), rel=1e-6)
@@ -259,3 +260,101 @@ def test_candidates_file_read_as_a_card_is(tmp_path):
     bad.write_text("[grid.normal_force\nunit = 'N'\n")
     with pytest.raises(InputError, match="bad.toml"):
         read_candidates(str(bad), model)
+
+
+# ---- design from a fit: a linear-Gaussian model fitted to data, its posterior known in closed form
+@pytest.fixture(scope="module")
+def plane_fit(tmp_path_factory):
+    """The plane y = a + b x1 + c x2 (tests/linear_gaussian.py), normal priors and a noise sd
+    fixed by its prior to 1%, fitted to 24 rows whose x1 and x2 are correlated: a Gaussian
+    posterior with correlated coefficients.  Returns (fit, x1, x2) of the data."""
+    import linear_gaussian as lg
+
+    from skinfit import paths, registry
+
+    folder = tmp_path_factory.mktemp("plane")
+    (folder / "models").mkdir()
+    (folder / "priors").mkdir()
+    (folder / "models" / "plane_test.toml").write_text(lg.CARD)
+    (folder / "priors" / "plane_test.toml").write_text(lg.PRIORS)
+    registry.register("forward", lg.FORWARD, lg.plane)
+    paths.set_search_path([folder])
+    try:
+        rng = np.random.default_rng(11)
+        x1 = np.linspace(0.0, 2.0, 24)
+        x2 = 0.8 * x1 + rng.normal(0.0, 0.3, 24)
+        y = 0.3 + 0.8 * x1 - 0.5 * x2 + rng.normal(0.0, 0.2, 24)
+        csv = folder / "plane.csv"
+        pd.DataFrame({"x1 [V]": x1, "x2 [1]": x2, "y [1]": y}).to_csv(csv, index=False)
+        fit = skinfit.fit("plane_test", str(csv), rng=5)
+        assert fit.converged
+        yield fit, x1, x2
+    finally:
+        paths.set_search_path([])
+        registry.unregister("forward", lg.FORWARD)
+
+
+PLANE_CANDIDATES = {"grid": {"x1": {"unit": "V", "values": [0.0, 1.0, 2.0, 4.0]},
+                             "x2": {"unit": "1", "values": [-1.0, 1.0]}}}
+
+
+def _plane_truth(result, x1, x2, focus):
+    """Closed forms for the plane: the posterior covariance S given the data (noise sd the
+    design's), the gain about the coefficients ``focus`` of one more measurement at each
+    candidate, 0.5 log det S_ff / det S'_ff, and of the plan's points together."""
+    import linear_gaussian as lg
+
+    sigma = result.settings["noise"]["y"]["scale"]
+    S = lg.posterior_cov(x1, x2, sigma)
+    f = np.ix_(focus, focus)
+
+    def gain(X):
+        after = np.linalg.inv(np.linalg.inv(S) + X.T @ X / sigma**2)
+        return 0.5 * (np.linalg.slogdet(S[f])[1] - np.linalg.slogdet(after[f])[1])
+
+    t, p = result.table, result.plan
+    single = np.array([gain(lg.rows([a], [b])) for a, b in zip(t["x1 [V]"], t["x2 [1]"])])
+    return single, gain(lg.rows(p["x1 [V]"].to_numpy(), p["x2 [1]"].to_numpy())), S, sigma
+
+
+def _agrees(value, se, bias, exact):
+    """Agreement within the reported error: 3 standard errors plus the stated bias."""
+    return np.abs(np.asarray(value) - exact) <= 3 * np.asarray(se) + np.abs(np.asarray(bias))
+
+
+def test_design_from_a_fit_gain_about_a_subset_matches_closed_form_with_nuisance_parameters(plane_fit):
+    """Issue 39.1: the gain about b (a and c nuisance, correlated with b in the posterior) of one
+    more measurement x is 0.5 log(var_post(b) / var_post+x(b)); the old estimator swapped the
+    outer draw's b into draws whose a and c did not go with it, and reported a negative gain."""
+    fit, x1, x2 = plane_fit
+    S = np.cov(np.column_stack([fit.group("posterior")[k].values.ravel() for k in "abc"]), rowvar=False)
+    corr = S / np.sqrt(np.outer(np.diag(S), np.diag(S)))
+    assert np.abs(corr[1, [0, 2]]).max() > 0.7  # the nuisance parameters go with b
+    result = skinfit.design(fit, PLANE_CANDIDATES, n=4, params=["b"], rng=2)
+    single, batch, _, _ = _plane_truth(result, x1, x2, [1])
+    t = result.table
+    assert single.min() < 0.05 and single.max() > 0.5  # the closed forms span small and large gains
+    assert _agrees(t["eig"], t["eig_se"], t["eig_bias"], single).all(), (t, single)
+    assert (t["eig"] + 2 * t["eig_se"] >= 0).all()
+    assert (t["eig_upper"] + 3 * t["eig_upper_se"] >= single).all()  # an upper bound
+    plan = result.comparison.loc["plan"]
+    assert _agrees(plan["eig_nmc"], plan["eig_nmc_se"], plan["eig_nmc_bias"], batch), (plan, batch)
+
+
+def test_design_from_a_fit_gain_about_all_parameters_matches_closed_form(plane_fit):
+    """Issue 39.1: about all parameters, 0.5 log det(I + X S X^T / sigma^2), S the posterior
+    covariance: for one measurement at each candidate and for the plan's points together."""
+    import linear_gaussian as lg
+
+    fit, x1, x2 = plane_fit
+    result = skinfit.design(fit, PLANE_CANDIDATES, n=4, rng=3)
+    single, batch, S, sigma = _plane_truth(result, x1, x2, [0, 1, 2])
+    t, p = result.table, result.plan
+    rows = lg.rows(t["x1 [V]"].to_numpy(), t["x2 [1]"].to_numpy())
+    assert single == pytest.approx(0.5 * np.log1p(np.einsum("ci,ij,cj->c", rows, S, rows) / sigma**2))
+    Xp = lg.rows(p["x1 [V]"].to_numpy(), p["x2 [1]"].to_numpy())
+    assert batch == pytest.approx(0.5 * np.linalg.slogdet(np.eye(len(Xp)) + Xp @ S @ Xp.T / sigma**2)[1])
+    assert _agrees(t["eig"], t["eig_se"], t["eig_bias"], single).all(), (t, single)
+    assert (t["eig"] <= single + 3 * t["eig_se"]).all()  # a lower bound about all parameters
+    plan = result.comparison.loc["plan"]
+    assert _agrees(plan["eig_nmc"], plan["eig_nmc_se"], plan["eig_nmc_bias"], batch), (plan, batch)
