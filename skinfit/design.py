@@ -468,8 +468,9 @@ def _is_log_evidence(problem, y_n, X, u_fixed, idx, loc, shape, n_inner, df, rng
     """log of the importance-sampling estimate of the integral of p(y_n | u) p(u_idx | u_rest)
     over the coordinates ``idx`` (the rest held at ``u_fixed``), with a Student-t proposal; and
     the same from the first half of the draws (for the bias estimate)."""
-    shape = 0.5 * (shape + shape.T)
-    q = stats.multivariate_t(loc, shape, df=df)
+    w, V = np.linalg.eigh(0.5 * (shape + shape.T))  # positive definite to rounding: a data set that
+    w = np.maximum(w, 1e-8 * max(w.max(), 1e-300))  # determines u finely leaves S near-singular
+    q = stats.multivariate_t(loc, (V * w) @ V.T, df=df)
     v = np.asarray(q.rvs(n_inner, random_state=rng), dtype=float).reshape(n_inner, len(idx))
     u = np.broadcast_to(u_fixed, (n_inner, len(u_fixed))).copy()
     u[:, idx] = v
