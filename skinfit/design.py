@@ -9,13 +9,15 @@ Estimators (every random draw from the one ``rng``):
 * One candidate at a time: nested Monte Carlo (Ryan 2003, "Estimating expected information
   gains for experimental designs with application to the random fatigue-limit model";
   Rainforth et al. 2018, "On nesting Monte Carlo estimators"), vectorised over candidates and
-  inner draws.  The outer draws, their simulated observations and the ``M`` inner draws are
-  shared by every candidate (common random numbers: differences between candidates are
-  estimated much better than the values).  The reported error is the outer standard error;
-  the inner estimate adds a bias of order 1/M upwards (Rainforth et al. 2018).
-  For a subset of parameters the nuisance parameters are marginalised by swapping the outer
-  draw's target values into each inner draw, exact when the target and nuisance parameters are
-  independent (as the prior files make them; an approximation from a fit's posterior).
+  inner draws (:func:`eig_nmc`).  The outer draws, their simulated observations and the ``M``
+  inner draws are shared by every candidate (common random numbers: differences between
+  candidates are estimated much better than the values).  ``eig`` is the value to read: the
+  outer draw counted among the inner ones (Foster et al. 2019), biased low by O(1/M), most
+  where the EIG nears log M; ``eig_bias`` estimates that bias (M/2 inner draws against M) and
+  ``eig_se`` includes the shared inner draws' variance (a jackknife over blocks of them).
+  For a subset of parameters the nuisance parameters are drawn *given* the outer draw's
+  targets: for the priors (independent) a swap, for a Gaussian the regression on the targets,
+  for a fit's posterior that regression as a proposal weighted by the fit's own density.
 * Batches: greedy selection on the Laplace / Fisher-information approximation
   EIG ~ E_theta[0.5 log det Sigma0_psi - 0.5 log det Sigma_post_psi(theta)], Sigma_post^-1 =
   Sigma0^-1 + sum of the points' Fisher information (a Bayesian D_s-optimal criterion, Chaloner
@@ -25,7 +27,9 @@ Estimators (every random draw from the one ``rng``):
   one.  The EIG of the whole batch is then estimated jointly by nested Monte Carlo with
   Laplace-based importance sampling of the inner draws (Beck et al. 2018, "Fast Bayesian
   experimental design: Laplace-based importance sampling for the expected information gain"),
-  which stays accurate where plain inner sampling from the prior saturates.
+  which stays accurate where plain inner sampling from the prior saturates; from a fit, whose
+  density is known only up to a constant and whose posterior may be far from its Gaussian
+  approximation, by :func:`eig_nmc` over the fit's own draws instead.
 * Discrimination: greedy on the expected log Bayes factor of the generating model against its
   best competitor (capped at +-6 nats), each model's marginal likelihood of the simulated batch
   by nested Monte Carlo over its own prior (or fit) draws at the fixed noise sd; these are
@@ -215,7 +219,10 @@ def conditional_gain(cov, focus):
     a joint draw (psi, eta) is a draw of eta | psi*, exactly; B = 0 (a plain swap) when the
     cross-covariance is zero, as for the independent priors of a prior file."""
     nuis = np.setdiff1d(np.arange(len(cov)), focus)
-    return np.linalg.solve(cov[np.ix_(focus, focus)], cov[np.ix_(focus, nuis)]).T
+    try:
+        return np.linalg.solve(cov[np.ix_(focus, focus)], cov[np.ix_(focus, nuis)]).T
+    except np.linalg.LinAlgError:  # a target without spread in the draws: least squares
+        return np.linalg.lstsq(cov[np.ix_(focus, focus)], cov[np.ix_(focus, nuis)], rcond=None)[0].T
 
 
 def _extra_support(problem, X):
@@ -267,7 +274,12 @@ def _nuisance_sampler(problem, rng, out_idx, focus, n_draws, df=10.0):
     loc, cov = joint.mean(axis=0), np.atleast_2d(np.cov(joint, rowvar=False))
     gain = conditional_gain(cov, focus)
     shape = cov[np.ix_(nuis, nuis)] - gain @ cov[np.ix_(focus, nuis)]
-    chol = np.linalg.cholesky(0.5 * (shape + shape.T))
+    shape = 0.5 * (shape + shape.T)
+    try:
+        chol = np.linalg.cholesky(shape)
+    except np.linalg.LinAlgError:  # singular to rounding (a nuisance coordinate the targets fix)
+        w, V = np.linalg.eigh(shape)
+        chol = V * np.sqrt(np.maximum(w, 1e-12 * max(w.max(), 1e-300)))
 
     def draw(psi):
         R, p = len(psi), len(nuis)
@@ -305,8 +317,9 @@ def eig_nmc(problem, X, rng, *, params=None, n_outer=500, n_inner=500, n_blocks=
     error, the outer draws' plus a jackknife over ``n_blocks`` blocks of the inner draws (shared
     by every outer draw, so the outer standard error alone misses their part).
 
-    ``eig_upper``, ``eig_upper_se``: an upper bound in expectation, the outer draw left out of
-    p^(y_n) (Ryan 2003); heavy-tailed where the inner draws miss the outcomes: the top of a
+    ``eig_upper``, ``eig_upper_se``: an upper bound in expectation (about all parameters; for a
+    subset as far as p^(y_n | psi_n) with the outer draw is biased up), the outer draw left out
+    of p^(y_n) (Ryan 2003); heavy-tailed where the inner draws miss the outcomes: the top of a
     bracket, not an estimate.
 
     ``batch=True``: the EIG of all the points of X measured together instead, (1,) arrays.
@@ -759,8 +772,9 @@ def read_candidates(source, model):
             units[name] = spec["unit"]
         size = math.prod(len(v) for v in columns.values())
         if size > MAX_CANDIDATES:
-            raise InputError(where, f"the grid has {size:,} candidates ({' x '.join(str(len(v)) for v in columns.values())}); "
-                             f"at most {MAX_CANDIDATES:,}: use fewer values", field="grid")
+            shape = " x ".join(str(len(v)) for v in columns.values())
+            raise InputError(where, f"the grid has {size:,} candidates ({shape}); at most {MAX_CANDIDATES:,}: use "
+                             f"fewer values", field="grid")
         names = list(columns)
         grids = np.meshgrid(*[np.asarray(columns[k]) for k in names], indexing="ij")
         columns = {k: g.ravel() for k, g in zip(names, grids)}
@@ -978,10 +992,11 @@ class DesignResult:
     information gain of one measurement there, nats, by nested Monte Carlo (:func:`eig_nmc`):
     ``eig`` (the value to read), ``eig_se`` (its Monte Carlo error), ``eig_bias`` (its
     estimated bias), ``eig_upper`` and ``eig_upper_se`` (an upper bound); ``eig_laplace`` (the
-    Laplace approximation the plan is chosen on), ``in_plan`` (times the plan uses it).  ``plan``: the n measurements to run, user units, in the order
-    chosen.  ``comparison``: plan vs baseline (EIG of the whole batch by nested Monte Carlo with
-    its error and estimated bias, Laplace EIG; with ``discriminate``, expected ln BF and
-    P(ln BF > 3)).  ``sd``: per target parameter, the sd now and predicted after the plan and after the baseline, in
+    Laplace approximation the plan is chosen on), ``in_plan`` (times the plan uses it).
+    ``plan``: the n measurements to run, user units, in the order chosen.  ``comparison``: plan
+    vs baseline (EIG of the whole batch by nested Monte Carlo with its error and estimated bias,
+    Laplace EIG; with ``discriminate``, expected ln BF and P(ln BF > 3)).  ``sd``: per target
+    parameter, the sd now and predicted after the plan and after the baseline, in
     the coordinate u (``log`` = sd of the natural log, i.e. a relative sd).  ``settings``: the
     estimators, draw counts, noise, seed and what was dropped.
     """
@@ -1013,7 +1028,8 @@ class DesignResult:
         """The EIG of one measurement: which column to read, the best candidates, the bias."""
         t = self.table
         covs = [c for c in t.columns if c.endswith("]")]
-        best = t.sort_values("eig", ascending=False).head(5)[covs + ["eig", "eig_se", "eig_bias", "eig_upper"]]
+        shown = [c for c in ("eig", "eig_se", "eig_bias", "eig_upper") if c in t]  # a folder of an older skinfit
+        best = t.sort_values("eig", ascending=False).head(5)[covs + shown]
         lines = ["one measurement (candidates.csv): read eig +- eig_se (nats); eig_bias is its estimated Monte "
                  "Carlo bias, eig_upper an upper bound. Best candidates:", best.to_string(index=False)]
         over = self.settings.get("eig_bias_over_se", 0)
@@ -1253,7 +1269,7 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     if baseline is not None and not isinstance(baseline, (str, os.PathLike)):
         raise InputError("--baseline", f"expected a dataset id or path (got {type(baseline).__name__})")
     targets = list(names) if params is None else params
-    if isinstance(candidates, dict) and {"grid", "points"} & set(candidates) or isinstance(candidates, (str, os.PathLike)):
+    if isinstance(candidates, (str, os.PathLike)) or isinstance(candidates, dict) and {"grid", "points"} & set(candidates):
         X, units = read_candidates(candidates, model)
     elif isinstance(candidates, (pd.DataFrame, Mapping)):
         X, units = _si_candidates(candidates, model)
