@@ -571,3 +571,54 @@ def test_design_advice_names_real_options(plane_fit, tmp_path, capsys):
     out.write_text("a file")
     assert main(["design", "electroadhesion", "--candidates", _grid(tmp_path, GOOD_GRID), "--out", str(out)]) == 2
     assert "--out: " in capsys.readouterr().err
+
+
+# ---- property: a damaged candidates file is an InputError or still a valid set of candidates --
+def _valid_candidates(X, model):
+    n = {len(v) for v in X.values()}
+    assert len(n) == 1 and 1 <= n.pop() <= 10**6  # at most a million candidates (design.MAX_CANDIDATES)
+    for c in model.covariates:
+        v = np.asarray(X[c.name], float)
+        assert np.isfinite(v).all() or (c.optional and np.isnan(v).all())
+
+
+POINTS = {"units": {"normal_force": "mN", "voltage": "V"},
+          "points": [{"normal_force": 200, "voltage": 0}, {"normal_force": 2000, "voltage": 200}]}
+GRID_DOC = {"grid": {"normal_force": {"unit": "mN", "from": 200, "to": 2000, "num": 4},
+                     "voltage": {"unit": "V", "values": [0, 100, 200]}}}
+
+
+def test_property_damaged_candidates_file_is_an_input_error_or_valid(tmp_path):
+    """Issue 39.14, widened to generated files: whatever the damage to a candidates file (keys,
+    values, types, TOML text), reading it raises InputError or gives valid candidates."""
+    import tomllib
+
+    from hypothesis import HealthCheck, given, settings
+    from test_fuzz_inputs import damaged, damaged_text, dumps
+
+    model = skinfit.load_model("electroadhesion")
+
+    def check(load):
+        try:
+            X, _ = load()
+        except InputError as exc:
+            assert str(exc).strip()
+            return
+        _valid_candidates(X, model)
+
+    @settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(doc=damaged(GRID_DOC) | damaged(POINTS))
+    def parsed(doc):
+        check(lambda: read_candidates(doc, model))
+
+    @settings(max_examples=20, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(raw=damaged_text('[grid.normal_force]\nunit = "mN"\nvalues = [200, 2000]\n'
+                            '[grid.voltage]\nunit = "V"\nfrom = 0\nto = 200\nnum = 3\n'))
+    def text(raw):
+        path = tmp_path / f"c{abs(hash(raw))}.toml"
+        path.write_bytes(raw)
+        check(lambda: read_candidates(str(path), model))
+
+    assert tomllib.loads(dumps(GRID_DOC)) == GRID_DOC
+    parsed()
+    text()
