@@ -1556,13 +1556,28 @@ def cli_design(args):
 
     if args.n <= 0:
         raise InputError("--n", f"the number of measurements must be > 0 (got {args.n})")
-    if args.out:  # refused before the work, not after it
+    created = False
+    if args.out:  # made (or refused) before the work, not after it
         out = Path(args.out)
         if out.exists() and not out.is_dir():
             raise InputError("--out", f"{out} is a file, not a folder")
-        parent = next(p for p in (out, *out.parents) if p.exists())
-        if not os.access(parent, os.W_OK | os.X_OK):
-            raise InputError("--out", f"cannot write into {parent}")
+        created = not out.exists()
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            probe = out / ".skinfit-write-test"
+            probe.touch()
+            probe.unlink()
+        except OSError as exc:
+            raise InputError("--out", f"cannot write into {out} ({exc.strerror or exc})") from None
+    try:
+        return _cli_design_run(args, load_fit, load_model)
+    except BaseException:
+        if created and not any(Path(args.out).iterdir()):  # nothing written: leave no empty folder behind
+            Path(args.out).rmdir()
+        raise
+
+
+def _cli_design_run(args, load_fit, load_model):
     params = [p.strip() for p in args.params.split(",")] if args.params else None
     if args.from_fit:
         source = load_fit(args.from_fit)
