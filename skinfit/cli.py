@@ -88,7 +88,9 @@ def _cmd_priors(args):
         pass
     from .references import cite
 
-    rows = [{"parameter": n, "unit": units.get(n, "(noise, observable's unit)"), "prior": p.describe(),
+    noise_unit = {n: "1 (Student-t degrees of freedom)" if n == "nu" or n.startswith("nu_") else "(noise, observable's unit)"
+                  for n in priors.priors}
+    rows = [{"parameter": n, "unit": units.get(n, noise_unit[n]), "prior": p.describe(),
              "source": p.source, "cited": cite(p.source)} for n, p in priors.priors.items()]
     if args.json:
         return print(json.dumps(rows, indent=2))

@@ -62,6 +62,9 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
     """One table ranked by log evidence: log Z +- se, log Bayes factor against the best with its
     error and strength in words (Kass & Raftery 1995), and PSIS-LOO elpd +- se with the number of
     Pareto k > 0.7.  Refuses fits made on different data.
+
+    An approximate estimate's caveat (Laplace: the prior bounds that cut its Gaussian, the
+    bracket on log Z from the posterior draws) is in ``table.attrs["caveats"]``, model -> text.
     """
     fits = list(fits)
     if len(fits) < 2:
@@ -70,9 +73,11 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
     if len(hashes) > 1:
         described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.attrs['dataset_sha256'][:12]})" for f in fits)
         raise InputError("compare", f"fits were made on different data and cannot be compared: {described}")
-    rows = []
+    rows, caveats = [], {}
     for f, label in zip(fits, run_labels(fits)):  # two runs of one model: labelled by their options
         ev = evidence(f, method=method, rng=rng)
+        if ev.caveat:
+            caveats[label] = ev.caveat
         lo = loo_record(f)
         rows.append({"model": label, "log_z": ev.log_z, "log_z_se": ev.se, "method": ev.method,
                      "approximate": ev.approximate, "elpd_loo": lo["elpd"], "elpd_loo_se": lo["se"],
@@ -86,8 +91,10 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
     table["strength"] = ["best" if i == 0 else f"{bayes_factor_strength(-lbf)} for {best['model']}"
                          for i, lbf in enumerate(table["log_bf_vs_best"])]
     table.index = table.pop("model")
-    return table[["log_z", "log_z_se", "log_bf_vs_best", "log_bf_se", "strength", "elpd_loo", "elpd_loo_se",
-                  "p_loo", "pareto_k_gt_0.7", "method", "approximate", "converged"]]
+    table = table[["log_z", "log_z_se", "log_bf_vs_best", "log_bf_se", "strength", "elpd_loo", "elpd_loo_se",
+                   "p_loo", "pareto_k_gt_0.7", "method", "approximate", "converged"]]
+    table.attrs["caveats"] = {label: caveats[label] for label in table.index if label in caveats}
+    return table
 
 
 def cli_compare(args):
@@ -99,11 +106,17 @@ def cli_compare(args):
     if args.save_evidence:  # keep the evidence with the fit for reports and campaigns (asked for)
         for f, p in zip(fits, paths):
             f.save(p)
+    caveats = table.attrs.get("caveats", {})
     if args.json:
-        print(table.reset_index().to_json(orient="records", indent=2))
+        records = json.loads(table.reset_index().to_json(orient="records"))
+        for record in records:
+            record["caveat"] = caveats.get(record["model"], "")
+        print(json.dumps(records, indent=2))
     else:
         with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
             print(table.to_string())
         print("\nlog Z: natural-log evidence +- standard error; log_bf_vs_best = ln(Z/Z_best); "
               "strength on 2 ln BF (Kass & Raftery 1995); elpd_loo: PSIS-LOO (ArviZ)")
+        for label, text in caveats.items():
+            print(f"{label}: log Z {text}")
     return 0

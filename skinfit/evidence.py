@@ -19,7 +19,8 @@ import time
 
 import numpy as np
 
-from .evidence_methods import LogEvidence, bridge_sampling, laplace, nested
+from .errors import InputError
+from .evidence_methods import LaplaceError, LogEvidence, bridge_sampling, laplace, nested
 from .fit import as_generator
 
 __all__ = ["evidence", "posterior_draws", "METHODS"]
@@ -45,14 +46,20 @@ def evidence(fit: Fit, method: str = "bridge", *, rng: int | np.random.Generator
              n_repeats: int = 1, refresh: bool = False, **options) -> LogEvidence:
     """log Z of ``fit`` by ``method`` ("bridge" default, "laplace", "nested").
 
-    Returns a :class:`~skinfit.evidence_methods.LogEvidence` (``log_z``, ``se``, ...).
+    Returns a :class:`~skinfit.evidence_methods.LogEvidence` (``log_z``, ``se``, ``caveat``, ...).
     ``n_repeats`` > 1 repeats the estimate with fresh random splits and reports the spread.
     The result is stored in ``fit.attrs["evidence"]`` (save the fit to keep it).
+
+    Laplace integrates its Gaussian over the prior bounds (a posterior a bound cuts keeps only
+    the mass inside) and is checked against the fit's posterior draws, which bound log Z from
+    both sides (its ``caveat`` gives the bracket); where a Gaussian cannot describe the
+    posterior it raises :class:`~skinfit.InputError` in one line naming why.
     """
     if method not in METHODS:
         raise ValueError(f"unknown evidence method {method!r} (expected one of {', '.join(METHODS)})")
     cache = json.loads(fit.attrs.get("evidence", "{}"))
-    if method in cache and not refresh and cache[method].get("n_repeats", 1) >= n_repeats:
+    if (method in cache and not refresh and cache[method].get("n_repeats", 1) >= n_repeats
+            and (method != "laplace" or "caveat" in cache[method])):  # an unchecked Laplace value is redone
         return _from_dict(cache[method])
     rng = as_generator(rng if rng is not None else _seed_for(fit, method))
     post = fit.posterior
@@ -63,7 +70,13 @@ def evidence(fit: Fit, method: str = "bridge", *, rng: int | np.random.Generator
         result = bridge_sampling(post, z, rng=rng, n_repeats=n_repeats, ess=ess, **options)
     elif method == "laplace":
         z_map = post.to_z(np.array([[fit.map[n] for n in post.names]]))[0]
-        result = laplace(post, z_map, **options)
+        lower, upper = post.box_bounds()
+        try:
+            result = laplace(post, z_map, lower=lower, upper=upper, draws=post.to_z(posterior_draws(fit)),
+                             ess=_ess_of(fit), rng=rng, names=post.names, **options)
+        except LaplaceError as err:
+            raise InputError(f"evidence of {fit.model_id} on {fit.dataset_id}",
+                             f"{err}; use method='bridge' (the default)", field="method=laplace") from None
     else:
         def loglike(theta):
             return float(post.log_likelihood(np.asarray(theta)[None])[0])
@@ -96,9 +109,11 @@ def _seed_for(fit, method):
 
 def _to_dict(result):
     return {"log_z": result.log_z, "se": result.se, "method": result.method, "n_evals": result.n_evals,
-            "seconds": result.seconds, "approximate": result.approximate, "repeats": list(result.repeats)}
+            "seconds": result.seconds, "approximate": result.approximate, "repeats": list(result.repeats),
+            "caveat": result.caveat}
 
 
 def _from_dict(d):
     return LogEvidence(log_z=d["log_z"], se=d["se"], method=d["method"], n_evals=d["n_evals"],
-                       seconds=d["seconds"], approximate=d["approximate"], repeats=tuple(d.get("repeats", ())))
+                       seconds=d["seconds"], approximate=d["approximate"], repeats=tuple(d.get("repeats", ())),
+                       caveat=d.get("caveat", ""))

@@ -330,6 +330,15 @@ class Posterior:
                     z[:, j] = np.log(theta[:, j]) - func(p, self.constants)
         return z
 
+    def box_bounds(self):
+        """Bounds (lower, upper) of the sampled coordinates, each (d,): the prior bounds mapped
+        coordinate by coordinate (log, shifted log, identity); -inf and inf where the range of a
+        coordinate depends on other parameters (product, shear), which the density alone keeps."""
+        z = self.to_z(np.array([self._lo, self._hi]))
+        free = [j for j, _, _ in self._product] + [j for j, _ in self._shear]
+        z[0, free], z[1, free] = -np.inf, np.inf
+        return z[0], z[1]
+
     def log_jacobian(self, z):
         """log |d theta / d z| of the sampling map, shape (k,)."""
         return self._transform(z)[1]

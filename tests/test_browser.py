@@ -21,6 +21,8 @@ def _check(found):
     assert found["page_width"] <= 1280, f"the page scrolls sideways ({found['page_width']} px)"
 
 
+@pytest.mark.skipif(not (ROOT / "reports" / "example").is_dir(),
+                    reason="reports/example is not here (the sdist leaves its 13 MB of figures out)")
 def test_example_report_renders_without_overflow_broken_images_or_errors(tmp_path):
     _check(inspect(ROOT / "reports" / "example", tmp_path))
 

@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import subprocess
 import sys
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 import skinfit
+from skinfit.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +61,39 @@ def test_cli_compare_writes_evidence_into_the_runs(variant_fits, tmp_path):
     saved = skinfit.load_fit(tmp_path / "electroadhesion" / "fit.nc")
     cached = json.loads(saved.idata.attrs["evidence"])["bridge"]
     assert cached["log_z"] == pytest.approx(rows[0]["log_z"])
+
+
+def test_laplace_near_a_prior_bound_gives_a_number_with_its_caveat(variant_fits):
+    """Issue 39: the Coulomb variant on the shipped data presses d_air and E_star against their
+    upper prior bounds (the MAP of d_air is on it); Laplace used to raise.  Now its Gaussian is
+    integrated inside the bounds: within 0.1 nats of bridge sampling (measured 0.01), the caveat
+    names the bounds, and the draws' bracket holds the bridge value."""
+    coulomb = variant_fits[1]
+    bridge = skinfit.evidence(coulomb)
+    lap = skinfit.evidence(coulomb, method="laplace", refresh=True)
+    assert abs(lap.log_z - bridge.log_z) < 0.1, (lap, bridge)
+    assert lap.approximate and re.search(r"prior bounds of (E_star, )?d_air", lap.caveat)
+    low, high = lap.details["elbo"], lap.details["eubo"]
+    assert low - 3 * lap.details["elbo_se"] - 3 * bridge.se <= bridge.log_z <= high + 3 * lap.details["eubo_se"] + 3 * bridge.se
+    assert json.loads(coulomb.attrs["evidence"])["laplace"]["caveat"] == lap.caveat  # kept with the fit
+
+
+def test_laplace_near_a_prior_bound_in_cli_compare(variant_fits, tmp_path, capsys):
+    """`skinfit compare --method laplace` on the generating model and the Coulomb variant: the
+    table, then each model's caveat; with --json, each record carries its caveat."""
+    runs = []
+    for f in variant_fits:
+        f.save(tmp_path / f.model_id / "fit.nc")
+        runs.append(str(tmp_path / f.model_id))
+    capsys.readouterr()
+    assert main(["compare", *runs, "--method", "laplace"]) == 0
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err
+    assert re.search(r"^electroadhesion_coulomb: log Z approximate: .*prior bounds of .*d_air.*the posterior draws "
+                     r"bound log Z within \[", out, re.M)
+    assert main(["compare", *runs, "--method", "laplace", "--json"]) == 0
+    rows = {r["model"]: r for r in json.loads(capsys.readouterr().out)}
+    assert rows["electroadhesion_coulomb"]["method"] == "laplace" and "d_air" in rows["electroadhesion_coulomb"]["caveat"]
 
 
 @pytest.mark.slow

@@ -1,6 +1,7 @@
 """Evidence estimators against closed forms, quadrature and each other (issue 8)."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -8,7 +9,8 @@ from scipy import stats
 from scipy.special import logsumexp
 
 import skinfit
-from skinfit.evidence_methods import bayes_factor_strength, bridge_sampling, laplace, nested
+from skinfit.cli import main
+from skinfit.evidence_methods import LaplaceError, bayes_factor_strength, bridge_sampling, laplace, nested
 
 
 # ---- a linear-Gaussian model: log Z in closed form ----------------------------------------
@@ -126,10 +128,113 @@ def test_bad_draws_are_refused(lg, rng):
 
 
 def test_laplace_refuses_a_non_maximum(lg):
-    with pytest.raises(ValueError, match="not finite at the starting point"):
+    with pytest.raises(LaplaceError, match="not finite at the starting point"):
         laplace(lambda z: np.full(len(z), -np.inf), lg.post_mean)
-    with pytest.raises(ValueError, match="positive definite"):
+    with pytest.raises(LaplaceError, match="no maximum near the MAP .* along coordinate"):
         laplace(lambda z: np.sum(np.atleast_2d(z) ** 2, axis=-1), np.zeros(2))
+
+
+# ---- Laplace near a prior bound (issue 39): the Gaussian integrated over the bounds ----------
+
+class BoundedLinearGaussian(LinearGaussian):
+    """The linear-Gaussian model with its normal prior truncated to a box: the posterior is the
+    Gaussian posterior truncated to the box, and log Z = log Z_open + log P_post(box) -
+    log P_prior(box) in closed form (normal CDFs; one 1-D quadrature for a 2-D box)."""
+
+    def __init__(self, upper, d=3, n=30):
+        super().__init__(d=d, n=n)
+        self.lo, self.hi = np.full(d, -np.inf), np.asarray(upper, dtype=float)
+        sd = np.sqrt(np.diag(self.post_cov))
+        bounded = np.flatnonzero(np.isfinite(self.hi))
+        log_prior_mass = float(np.sum(stats.norm.logcdf(self.hi[bounded] / self.t)))
+        if len(bounded) == 1:
+            (i,) = bounded
+            post_mass = stats.norm.cdf((self.hi[i] - self.post_mean[i]) / sd[i])
+        else:  # P(b_i < u_i, b_j < u_j) = int_{-inf}^{u_i} phi_i(a) P(b_j < u_j | b_i = a) da
+            i, j = bounded
+            c = self.post_cov
+            slope, cond_sd = c[i, j] / c[i, i], math.sqrt(c[j, j] - c[i, j] ** 2 / c[i, i])
+            from scipy.integrate import quad
+
+            post_mass = quad(lambda a: stats.norm.pdf(a, self.post_mean[i], sd[i]) * stats.norm.cdf(
+                (self.hi[j] - self.post_mean[j] - slope * (a - self.post_mean[i])) / cond_sd),
+                -np.inf, self.hi[i], epsabs=1e-13, epsrel=1e-11)[0]
+        self.log_z_box = self.log_z + math.log(post_mass) - log_prior_mass
+        self.post_mass = post_mass
+        self._log_prior_mass = log_prior_mass
+
+    def log_target(self, b):
+        b = np.atleast_2d(b)
+        inside = np.all(b <= self.hi, axis=1)
+        return np.where(inside, super().log_target(b) - self._log_prior_mass, -np.inf)
+
+    def draws(self, n, rng):
+        out = super().draws(20 * n, rng)
+        return out[np.all(out <= self.hi, axis=1)][:n]
+
+
+def _upper(shifts, d=3):
+    """Upper bounds at the open posterior's mean + ``shifts`` sd (inf where None)."""
+    open_ = LinearGaussian(d=d, n=30)
+    sd = np.sqrt(np.diag(open_.post_cov))
+    return [np.inf if k is None else open_.post_mean[i] + k * sd[i] for i, k in enumerate(shifts)]
+
+
+@pytest.mark.parametrize("shifts", [(-1.5, None, None), (0.3, None, None), (1.5, None, None),
+                                    (-0.5, 0.2, None), (-2.0, -1.0, None)],
+                         ids=["mode-beyond-bound", "mode-at-bound", "mode-inside-near-bound", "two-bounds",
+                              "two-bounds-far-beyond"])
+def test_laplace_near_a_prior_bound_matches_the_closed_form(shifts):
+    """A posterior cut by prior bounds (the mode beyond, at or inside a bound; one or two bounded
+    coordinates): the Laplace value equals the closed form (exact: the log target is quadratic
+    inside the box), where the old Gaussian over all space was off by -log P_post(box) or
+    raised (the stencil crossed the bound)."""
+    model = BoundedLinearGaussian(_upper(shifts))
+    start = np.minimum(model.post_mean, model.hi)  # a MAP pressed against the bound
+    est = laplace(model.log_target, start, lower=model.lo, upper=model.hi)
+    assert model.post_mass < 0.95  # the bound matters: at least 0.05 nats in the closed form
+    assert est.log_z == pytest.approx(model.log_z_box, abs=1e-4)
+    assert est.approximate and "prior bounds of coordinate 0" in est.caveat
+
+
+def test_laplace_near_a_prior_bound_is_bracketed_by_the_draws(rng):
+    """With posterior draws the caveat gives an evidence bracket that holds the closed form."""
+    model = BoundedLinearGaussian(_upper((0.3, None, None)))
+    est = laplace(model.log_target, np.minimum(model.post_mean, model.hi), lower=model.lo, upper=model.hi,
+                  draws=model.draws(3000, rng), rng=rng, names=["b0", "b1", "b2"])
+    low, high = est.details["elbo"], est.details["eubo"]
+    assert low - 3 * est.details["elbo_se"] - 1e-9 <= model.log_z_box <= high + 3 * est.details["eubo_se"] + 1e-9
+    assert high - low < 0.02  # a Gaussian target: the bracket closes on it (here to rounding)
+    assert "prior bounds of b0" in est.caveat and f"within [{low:.2f}, {high:.2f}]" in est.caveat
+
+
+def test_laplace_refuses_a_gaussian_the_draws_contradict(rng):
+    """Where the curvature at the mode misdescribes the posterior (a fine ripple on a standard
+    normal: the Hessian sees the ripple, 2.3 nats too narrow), the draws' bracket excludes the
+    Laplace value: refused in one line, not a number 2 nats off."""
+    def ripple(z):
+        z = np.atleast_2d(z)[:, 0]
+        return -0.5 * z**2 + 0.01 * np.cos(z / 0.01) - 0.5 * math.log(2 * math.pi)  # log Z = 0.00002
+
+    assert laplace(ripple, [0.0]).log_z < -1.0  # unchecked, the value is > 1 nat off
+    with pytest.raises(LaplaceError, match=r"does not describe this posterior: .* lies outside"):
+        laplace(ripple, [0.0], draws=rng.standard_normal((4000, 1)), rng=rng)
+
+
+def test_laplace_caveat_states_a_loose_bracket(rng):
+    """A spike on a broad bump (equal masses): Laplace sees the spike alone (log Z -0.68, truth 0).
+    The draws cannot refute that value, but they bound log Z only loosely, and the caveat says
+    so with a bracket that holds the truth."""
+    def spike(z):
+        z = np.atleast_2d(z)[:, 0]
+        return np.logaddexp(stats.norm.logpdf(z, 0, 0.01), stats.norm.logpdf(z)) + math.log(0.5)
+
+    draws = np.where(rng.uniform(size=4000) < 0.5, 0.01, 1.0) * rng.standard_normal(4000)
+    est = laplace(spike, [0.0], draws=draws[:, None], rng=rng)
+    low, high = est.details["elbo"], est.details["eubo"]
+    assert est.log_z == pytest.approx(-0.68, abs=0.02)
+    assert low - 3 * est.details["elbo_se"] <= 0.0 <= high and high - low > 100
+    assert f"the posterior draws bound log Z within [{low:.2f}, {high:.2f}]" in est.caveat
 
 
 @pytest.mark.parametrize("log_bf, words", [(0.5, "not worth more than a bare mention"), (2.0, "positive"),
@@ -221,9 +326,28 @@ def test_laplace_near_gaussian_posterior(coulomb_fits, zero_volt):
 
 
 def test_laplace_refuses_a_flat_direction(coulomb_fits):
-    """A uniform prior on a parameter the data ignore leaves no curvature: a clear error."""
-    with pytest.raises(ValueError, match="Laplace"):
+    """A uniform prior on a parameter the data ignore leaves no curvature: a one-line refusal
+    naming the fit, the parameter and what to use instead (an InputError: the CLI's exit 2)."""
+    with pytest.raises(skinfit.InputError) as err:
         skinfit.evidence(coulomb_fits["base"], method="laplace")
+    message = str(err.value)
+    assert "\n" not in message and message.startswith("evidence of electroadhesion_coulomb on ")
+    assert re.search(r"no maximum near the MAP .* along (E_star|d_air)\b", message)
+    assert message.endswith("use method='bridge' (the default)")
+
+
+def test_laplace_refusal_in_cli_compare_is_one_line(coulomb_fits, tmp_path, capsys):
+    """`skinfit compare --method laplace` with a fit Laplace cannot describe: exit 2 and one line
+    on stderr naming the fit and why, no traceback, no table."""
+    runs = []
+    for name in ("round", "base"):
+        coulomb_fits[name].save(tmp_path / name / "fit.nc")
+        runs.append(str(tmp_path / name))
+    capsys.readouterr()
+    assert main(["compare", *runs, "--method", "laplace"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("skinfit: error: evidence of electroadhesion_coulomb on ") and "no maximum" in err
 
 
 def test_prior_width_enters_the_evidence(coulomb_fits):

@@ -2,10 +2,12 @@
 
 import json
 import os
+import re
 import shutil
 import stat
 import subprocess
 import sys
+import tarfile
 import warnings
 import zipfile
 from pathlib import Path
@@ -227,6 +229,51 @@ def test_wheel_carries_the_shipped_files(tmp_path):
             card = f"skinfit/_shipped/{kind}/{i}/dataset.toml" if kind == "datasets" else f"skinfit/_shipped/{kind}/{i}.toml"
             assert card in names
     assert "skinfit/py.typed" in names and "skinfit/references.toml" in names
+
+
+#: Files outside tests/ that the tests read but the sdist leaves out, and why that is safe.
+NOT_IN_SDIST = {"reports/example": "13 MB of figures; test_browser skips its check where it is absent"}
+
+
+def _files_the_tests_read():
+    """Repository paths outside tests/ that the test modules name as ``ROOT / "a" / "b"`` or
+    ``Path(__file__).resolve().parents[1] / "a" / ...`` (found by reading them, so a new one is
+    not forgotten), that exist here."""
+    chain = re.compile(r'(?:ROOT|parents\[1\])((?:\s*/\s*"[^"\n]+")+)')
+    found = set()
+    for module in (ROOT / "tests").glob("*.py"):
+        for m in chain.finditer(module.read_text()):
+            parts = re.findall(r'"([^"]+)"', m.group(1))
+            for k in range(len(parts), 0, -1):  # the longest prefix that exists (a file, or a folder)
+                rel = "/".join(parts[:k])
+                if (ROOT / rel).exists():
+                    if parts[0] != "tests":
+                        found.add(rel)
+                    break
+    return found
+
+
+@pytest.mark.slow
+def test_sdist_carries_every_file_its_tests_read(tmp_path):
+    """The sdist's tests pass only if it holds what they read outside tests/ (bench/fused.py,
+    the example plug-in, ...), whole: its include patterns are anchored at the root, so that
+    "models" does not take a plug-in's cards/models alone, nor "README.md" every README."""
+    pytest.importorskip("build", reason="building an sdist needs the `build` package (pip install build)")
+    subprocess.run([sys.executable, "-m", "build", "--sdist", "-o", str(tmp_path), str(ROOT)], check=True,
+                   timeout=600, capture_output=True)
+    (sdist,) = tmp_path.glob("skinfit-*.tar.gz")
+    with tarfile.open(sdist) as tar:
+        names = {n.split("/", 1)[1] for n in tar.getnames() if "/" in n}
+    needed = _files_the_tests_read()
+    assert {"bench/fused.py", "examples/skinfit-example-plugin", "campaigns/example.toml"} <= needed
+    for rel in sorted(needed - set(NOT_IN_SDIST)):
+        path = ROOT / rel
+        files = [path] if path.is_file() else [f for f in path.rglob("*") if f.is_file()
+                                                and not any(part.endswith(".egg-info") or part == "__pycache__"
+                                                            for part in f.relative_to(ROOT).parts)]
+        missing = [str(f.relative_to(ROOT)) for f in files if str(f.relative_to(ROOT)) not in names]
+        assert not missing, f"the sdist lacks {missing} (read by the tests)"
+    assert not any(n.startswith("bench/results/") for n in names)  # "README.md" anchored: no stray READMEs
 
 
 def test_fit_html_view_shows_verdict_warnings_and_summary(seeded_run):

@@ -1,10 +1,17 @@
 """A model added without editing skinfit (issue 22, point 3): the example plug-in package under
-examples/skinfit-example-plugin, installed into the test environment by scripts/setup.sh,
-registers its physics function through the ``skinfit.models`` entry point and brings its model
-card and prior file; skinfit lists it and fits it end to end, recovering the parameters that
-generated the data."""
+examples/skinfit-example-plugin registers its physics function through the ``skinfit.models``
+entry point and brings its model card and prior file; skinfit lists it and fits it end to end,
+recovering the parameters that generated the data.
 
+scripts/setup.sh installs the plug-in; where it is not installed (``pip install -e ".[test]"``
+alone, or the tests of an unpacked sdist) the tests install it for this process, as pip would:
+its package folder and a ``.dist-info`` with its entry points on ``sys.path``."""
+
+import importlib
+import sys
+import tomllib
 from importlib.metadata import PackageNotFoundError, distribution
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,15 +21,46 @@ import skinfit
 from skinfit import registry
 
 MU, F0, SIGMA = 0.45, 0.08, 0.01  # generating parameters [1], [N], [N]
+PLUGIN = Path(__file__).resolve().parents[1] / "examples" / "skinfit-example-plugin"
+
+
+def _dist_info(site, project):
+    """A minimal installed-distribution record of ``project`` (its pyproject ``[project]``
+    table) under ``site``: METADATA and entry_points.txt, what importlib.metadata reads."""
+    info = site / f"{project['name'].replace('-', '_')}-{project['version']}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project['name']}\nVersion: {project['version']}\n")
+    lines = []
+    for group, points in project.get("entry-points", {}).items():
+        lines += [f"[{group}]", *(f"{name} = {value}" for name, value in points.items()), ""]
+    (info / "entry_points.txt").write_text("\n".join(lines))
 
 
 @pytest.fixture(scope="module", autouse=True)
-def installed():
+def installed(tmp_path_factory):
     try:
         distribution("skinfit-example-plugin")
+        yield  # installed (scripts/setup.sh): the tests use it as it is
+        return
     except PackageNotFoundError:
-        pytest.fail("the example plug-in is not installed: run `bash scripts/setup.sh test` "
-                    "(pip install -e examples/skinfit-example-plugin)")
+        pass
+    project = tomllib.loads((PLUGIN / "pyproject.toml").read_text())["project"]
+    site = tmp_path_factory.mktemp("site")
+    _dist_info(site, project)
+    added = [str(site), str(PLUGIN)]
+    sys.path[:0] = added
+    importlib.invalidate_caches()
+    registry._reset()  # skinfit reads the entry points again, now with the plug-in's
+    try:
+        assert distribution("skinfit-example-plugin").version == project["version"]
+        yield
+    finally:
+        for entry in added:
+            sys.path.remove(entry)
+        for name in [m for m in sys.modules if m.split(".")[0] == "skinfit_example_plugin"]:
+            del sys.modules[name]
+        importlib.invalidate_caches()
+        registry._reset()
 
 
 def _data(rng, n=60):
