@@ -60,6 +60,7 @@ import pandas as pd
 from scipy import special, stats
 
 from .errors import InputError
+from .outputs import check_outputs
 from .units import UNITS, dimension, to_si
 
 __all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
@@ -744,9 +745,11 @@ class DesignResult:
             lines += ["", "discrimination (per generating model):", self.discrimination.to_string(index=False)]
         return "\n".join(lines)
 
-    def write(self, out):
+    def write(self, out, *, overwrite=False):
         """plan.csv (ready to run), candidates.csv, baseline.csv, comparison.csv, sd.csv,
-        design.json (settings and what :func:`load_design` needs), eig.png."""
+        design.json (settings and what :func:`load_design` needs), eig.png (:data:`FILES`). A
+        folder holding an earlier design's files is refused unless ``overwrite``."""
+        check_outputs(out, FILES, command="skinfit design", overwrite=overwrite)
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         self.plan.to_csv(out / "plan.csv", index=False)
@@ -1110,6 +1113,11 @@ def design_section_html(result, figdir):
     return "\n".join(parts)
 
 
+#: The files :meth:`DesignResult.write` writes.
+FILES = ("plan.csv", "candidates.csv", "baseline.csv", "comparison.csv", "sd.csv", "discrimination.csv",
+         "design.json", "eig.png")
+
+
 def cli_design(args):
     """``skinfit design MODEL --candidates FILE --n N [--from FIT] [--params A,B] [--discriminate M ...]
     [--sigma S] [--seed S] [--out DIR]``."""
@@ -1118,6 +1126,8 @@ def cli_design(args):
 
     if args.n <= 0:
         raise InputError("--n", f"the number of measurements must be > 0 (got {args.n})")
+    if args.out:  # an earlier design there: refused before the work, unless --overwrite
+        check_outputs(args.out, FILES, command="skinfit design", overwrite=args.overwrite)
     params = [p.strip() for p in args.params.split(",")] if args.params else None
     if args.from_fit:
         source = load_fit(args.from_fit)
@@ -1130,6 +1140,6 @@ def cli_design(args):
                     n_outer=args.outer, n_inner=args.inner)
     print(result.text())
     if args.out:
-        out = result.write(args.out)
+        out = result.write(args.out, overwrite=args.overwrite)
         print(f"\nwritten: {out / 'plan.csv'} (user units), candidates.csv, comparison.csv, sd.csv, eig.png")
     return 0
