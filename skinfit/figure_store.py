@@ -108,7 +108,8 @@ def own_folder(create=False):
             return folder
         if not create and not folder.exists():
             return None
-        if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+        claiming = f".{MARKER}."  # another process's marker being written (checkpoint.temp_file) is no other file
+        if folder.exists() and (not folder.is_dir() or any(not p.name.startswith(claiming) for p in folder.iterdir())):
             if str(folder) not in _WARNED:
                 _WARNED.add(str(folder))
                 warnings.warn(f"{folder}: holds files the figure store did not write (no {MARKER}): figures are "
