@@ -179,11 +179,9 @@ def _cmd_fit(args):
         if args.json:
             print(index.to_json(orient="records", indent=2))
         else:
-            from .provenance import input_lines
+            from .groups import read_inputs
 
-            doc = json.loads((out / "index.json").read_text())  # the files every group's fit read
-            print("\n".join(input_lines({"inputs": json.dumps(doc["inputs"]), "model_sha256": doc["model_sha256"],
-                                          "priors_sha256": doc["priors_sha256"]})) + "\n")
+            print("\n".join(read_inputs(out)) + "\n")  # the files every group's fit read
             print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
         warned = int((~index["converged"].astype(bool) | (index["warnings"] > 0)).sum())
         if args.strict and warned:  # as for a single fit: results kept, exit 3

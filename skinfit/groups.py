@@ -35,10 +35,10 @@ import pandas as pd
 from .data import Dataset, load_dataset
 from .errors import InputError
 from .fit import fit, load_fit, resolve_inputs
-from .provenance import input_record
+from .provenance import input_lines, input_record
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
-           "read_index", "index_document",
+           "read_index", "index_document", "read_inputs",
            "record_source", "source_problem", "data_drift"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
@@ -201,6 +201,18 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
                          "path": rel.as_posix()})
             _write_json(out_dir / "index.json", {**header, "groups": rows})
     return pd.DataFrame(rows)
+
+
+def read_inputs(run):
+    """The lines that say which model card, prior file and data file the fits of the run by
+    groups in folder ``run`` read (:func:`skinfit.provenance.input_lines` of its index.json);
+    an index without them (an older skinfit's) says so."""
+    try:
+        doc = json.loads((Path(run) / "index.json").read_text(encoding="utf-8"))
+        return input_lines({"inputs": json.dumps(doc["inputs"]), "model_sha256": doc["model_sha256"],
+                            "priors_sha256": doc["priors_sha256"]})
+    except (OSError, ValueError, KeyError, TypeError):
+        return [f"inputs: not recorded in {Path(run) / 'index.json'}"]
 
 
 _INDEX_KINDS = "expected a `fit --by` index (with 'groups') or a campaign index (a list)"
