@@ -39,7 +39,8 @@ LIBRARIES = ("numpy", "pandas", "xarray", "scipy.stats", "emcee", "nlopt", "h5py
 
 def commands(tmp, source=None):
     fit = ["fit", "electroadhesion", "electroadhesion_synthetic", "--out", str(Path(tmp) / "run"), "--seed", "1",
-           "--quiet"]
+           "--quiet", "--overwrite"]  # repeated into one folder: each run replaces the last
+    older = [*fit[:3], "--out", str(Path(tmp) / "run_older"), *fit[5:-1]]  # code from before --overwrite
     cli = "from skinfit.cli import main; sys.exit(main({!r}))"
     return [
         ("python -c pass", [PY, "-c", "pass"], None),
@@ -51,7 +52,7 @@ def commands(tmp, source=None):
         ("libraries only: import " + ", ".join(LIBRARIES), [PY, "-c", "import " + ", ".join(LIBRARIES)], None),
     ] + ([] if source is None else [
         (f"the same fit, the code in {source}",
-         ["env", f"PYTHONPATH={Path(source).resolve()}", PY, "-m", "skinfit", *fit], None)])
+         ["env", f"PYTHONPATH={Path(source).resolve()}", PY, "-m", "skinfit", *older], None)])
 
 
 def importtime(cmd, cwd, top=6):

@@ -46,7 +46,7 @@ def main(argv=None):
         result = run_sbc(model, n_sims=args.n_sims, n_draws=99, n_rows=FAMILIES.get(model), seed=args.seed,
                          max_steps=args.max_steps, jobs=args.jobs, progress=lambda m, model=model: print(f"{model}: {m}", flush=True))
         wall = time.perf_counter() - t0
-        write_sbc(result, RESULTS / "sbc" / model)
+        write_sbc(result, RESULTS / "sbc" / model, overwrite=True)
         t = result.table
         rows.append(f"| {model} | {result.dataset} ({result.settings['n_rows']} rows) | {len(result.ranks)} | "
                     f"{len(t)} | {t['p_min'].min():.3g} ({t['p_min'].idxmin()}) | {int(t['pass'].sum())}/{len(t)} | "

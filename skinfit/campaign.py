@@ -350,6 +350,9 @@ def check_campaign_out(campaign):
         raise InputError(out, "holds a single fit (fit.nc): give the campaign another out (nothing was written)")
     index = out / "index.json"
     if not index.exists():
+        if (out / "index.csv").exists():  # it would be replaced, and no campaign wrote it (none without its json)
+            raise InputError(out, "holds an index.csv that no campaign wrote (no index.json beside it): give the "
+                                  "campaign another out (nothing was written)")
         return
     try:
         kind, rows = index_document(index)

@@ -343,7 +343,7 @@ def _host():
 
 
 #: Temporary files of an atomic write: ``.<name>.<host>.<pid>-<random>.tmp`` beside the target.
-_TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9-]+)\.(?P<pid>\d+)-[A-Za-z0-9_]+\.tmp$")
+_TEMP = re.compile(r"^\.(?P<name>.+)\.(?P<host>[A-Za-z0-9-]+)\.(?P<pid>\d+)-[a-z0-9_]{8}\.tmp$")  # mkstemp's 8
 
 
 def temp_file(path):
@@ -433,7 +433,9 @@ class CheckpointLock:
         os.write(fd, str(os.getpid()).encode())
         self._fd = fd
         for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):  # left by a killed writer
-            stale.unlink(missing_ok=True)
+            m = _TEMP.match(stale.name)
+            if m and m["name"] == self.path.name:  # a temp file of ours (temp_file), never a file of like name
+                stale.unlink(missing_ok=True)
         remove_stale_temps(self.path.parent, recursive=False)
         return self
 

@@ -172,7 +172,8 @@ def _cmd_fit(args):
         dataset = _cardless_csv(args)
         index = fit_by(args.model, dataset or args.dataset, args.by, out, priors=args.priors, seed=args.seed,
                        split=split, noise=args.noise, progress=not args.quiet,
-                       ess_target=args.ess, max_steps=args.max_steps)
+                       ess_target=args.ess, max_steps=args.max_steps, overwrite=args.overwrite,
+                       writes_card=dataset is not None)
         if dataset is not None:  # a CSV without a card: its card and a copy beside the results
             from .data import write_card
 
@@ -180,6 +181,9 @@ def _cmd_fit(args):
         if args.json:
             print(index.to_json(orient="records", indent=2))
         else:
+            from .groups import read_inputs
+
+            print("\n".join(read_inputs(out)) + "\n")  # the files every group's fit read
             print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
         warned = int((~index["converged"].astype(bool) | (index["warnings"] > 0)).sum())
         if args.strict and warned:  # as for a single fit: results kept, exit 3
@@ -192,27 +196,31 @@ def _cmd_fit(args):
 
     t0 = time.perf_counter()
     checkpoint = out / "checkpoint.h5"
-    if args.resume and not checkpoint.exists():
-        print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
     dataset = _cardless_csv(args)
     model, data, priors = resolve_inputs(args.model, dataset or args.dataset, args.priors)
-    check_out_dir(out, model, priors, data)  # results there: replaced only by a rerun of the same inputs
+    # results there are replaced only when asked (--overwrite), or continued (--resume)
+    claim = dict(overwrite=args.overwrite, resume=args.resume, writes_card=dataset is not None)
+    check_out_dir(out, model, priors, data, **claim)
+    if args.resume and not checkpoint.exists():
+        print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
     with CheckpointLock(checkpoint):
+        check_out_dir(out, model, priors, data, **claim)  # again, holding the lock: a run that ended meanwhile
         result = fit(model, data, priors=priors, rng=args.seed, split=split,
                      noise=args.noise, progress=not args.quiet,
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
-    path = result.save(out / "fit.nc")
-    summary = result.summary()
-    (out / "summary.csv").write_text(summary.to_csv())
-    card = None
-    if dataset is not None:  # a CSV without a card: its card and a copy beside the result
-        from .data import write_card
+        path = result.save(out / "fit.nc")  # still holding the lock: no other run sees the folder half written
+        summary = result.summary()
+        (out / "summary.csv").write_text(summary.to_csv())
+        card = None
+        if dataset is not None:  # a CSV without a card: its card and a copy beside the result
+            from .data import write_card
 
-        card = write_card(dataset, out / "dataset")
+            card = write_card(dataset, out / "dataset")
     if args.json:
         print(json.dumps({"fit": str(path), "summary_csv": str(out / "summary.csv"), "model": result.model_id,
                           "dataset": result.dataset_id, "dataset_card": None if card is None else str(card),
+                          "inputs": result.inputs,
                           "seed": int(result.attrs["seed"]),
                           "converged": bool(result.converged), "warnings": result.warnings,
                           "summary": json.loads(summary.to_json(orient="index")),
@@ -286,6 +294,8 @@ def build_parser():
                         "one result per group under --out plus index.json")
     s.add_argument("--resume", action="store_true",
                    help="continue an interrupted fit from its checkpoint in --out")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the results already in --out (without it, an --out holding results is refused)")
     s.add_argument("--checkpoint-every", type=_positive_float, default=30.0, metavar="SECONDS",
                    help="seconds between checkpoints (OUT/checkpoint.h5) while sampling (default 30)")
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
@@ -324,6 +334,7 @@ def build_parser():
     s.add_argument("--model", help="the model to use from a campaign with several")
     s.add_argument("--seed", type=int, default=None)
     s.add_argument("--out", help="output directory (default RUN/population)")
+    s.add_argument("--overwrite", action="store_true", help="replace a population already in --out")
     s.set_defaults(func=_lazy("skinfit.population", "cli_population"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")
@@ -336,6 +347,7 @@ def build_parser():
     s.add_argument("--jobs", type=_COUNT, default=1, help="simulations in parallel processes (default 1)")
     s.add_argument("--seed", type=_SEED, default=0)
     s.add_argument("--out", default=None, help="directory for the rank table and histogram")
+    s.add_argument("--overwrite", action="store_true", help="replace the SBC results already in --out")
     s.set_defaults(func=_lazy("skinfit.sbc", "cli_sbc"))
     s = sub.add_parser("demo", help="fit every shipped dataset with its model and variants, compare, report")
     s.add_argument("--out", default="runs/demo", help="where the fits go (default runs/demo)")
@@ -358,6 +370,7 @@ def build_parser():
     s.add_argument("--inner", type=_COUNT, default=400, help="inner Monte Carlo draws (default 400)")
     s.add_argument("--seed", type=_SEED, default=0, help="seed of every Monte Carlo draw (recorded; default 0)")
     s.add_argument("--out", help="directory for plan.csv, candidates.csv, comparison.csv, sd.csv, eig.png")
+    s.add_argument("--overwrite", action="store_true", help="replace the design already in --out")
     s.set_defaults(func=_lazy("skinfit.design", "cli_design"))
     return p
 
@@ -407,15 +420,19 @@ def _remove_empty(folder):
     """Remove ``folder`` and its sub-folders if they hold no files."""
     if not folder.is_dir():
         return
-    for sub in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
-        if not any(sub.iterdir()):
-            sub.rmdir()
-    if not any(folder.iterdir()):
-        folder.rmdir()
+    subs = [p for p in folder.rglob("*") if p.is_dir() and not p.is_symlink()]
+    for sub in sorted(subs, key=lambda p: len(p.parts), reverse=True) + [folder]:
+        try:
+            sub.rmdir()  # only an empty folder goes: a file written meanwhile keeps its folder
+        except OSError:
+            pass
 
 
 def _run(args):
     try:
+        from .paths import check_search_path
+
+        check_search_path()  # a mistyped --path or $SKINFIT_PATH folder: refused, not skipped
         code = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler below
     except InputError as exc:

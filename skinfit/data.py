@@ -71,6 +71,9 @@ class Dataset:
     model: str | None
     path: str
     sha256: str  # of the card and the data file together
+    card_file: str = ""  # absolute path of the card read ("" for a CSV without one or a DataFrame)
+    data_file: str = ""  # absolute path of the data file read ("" when the values come from elsewhere)
+    data_sha256: str = ""  # sha256 of the data file's bytes
 
     @property
     def units(self):
@@ -87,7 +90,8 @@ class Dataset:
         frame = self.frame.loc[np.asarray(mask)].reset_index(drop=True)
         digest = hashlib.sha256((self.sha256 + suffix).encode()).hexdigest()
         return Dataset(f"{self.id}[{suffix}]", self.title, frame, self.columns, self.groups,
-                       self.provenance, self.model, self.path, digest)
+                       self.provenance, self.model, self.path, digest, card_file=self.card_file,
+                       data_file=self.data_file, data_sha256=self.data_sha256)
 
     def with_observations(self, values, label):
         """A copy whose observable columns hold ``values`` (column -> (n,) array, SI units), e.g.
@@ -98,7 +102,7 @@ class Dataset:
             frame[col] = np.asarray(v, dtype=float)
             h.update(frame[col].to_numpy().tobytes())
         return Dataset(f"{self.id}[{label}]", self.title, frame, self.columns, self.groups,
-                       self.provenance, self.model, self.path, h.hexdigest())
+                       self.provenance, self.model, self.path, h.hexdigest(), card_file=self.card_file)
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
@@ -231,7 +235,8 @@ def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
     ds = Dataset(id=check_id(require(doc, "id", str, where, default=card.parent.name), where),
                  title=require(doc, "title", str, where, default=""), frame=frame,
                  columns=columns, groups=groups, provenance=MappingProxyType(provenance),
-                 model=doc.get("model"), path=where, sha256=digest)
+                 model=doc.get("model"), path=where, sha256=digest, card_file=str(Path(card).resolve()),
+                 data_file=str(Path(data_path).resolve()), data_sha256=hashlib.sha256(raw).hexdigest())
     if model is None and isinstance(ds.model, str):
         try:
             model = _as_model(ds.model)
@@ -330,7 +335,7 @@ def _load_csv(path, *, model=None, units=None, max_bytes=None):
     ds = Dataset(id=ident, title=f"{Path(path).name} (no card)", frame=frame, columns=columns,
                  groups=tuple(c.name for c in columns if c.kind == "category"),
                  provenance=MappingProxyType(provenance), model=getattr(model, "id", None), path=where,
-                 sha256=digest)
+                 sha256=digest, data_file=str(Path(path).resolve()), data_sha256=sha)
     if model is not None:
         check_units(ds, model)
     return ds
@@ -420,7 +425,9 @@ def write_card(dataset, folder, data_name="data.csv"):
         raise InputError(dataset.path, "only a dataset read from a CSV file can be written as a card")
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(src, folder / data_name)
+    target = folder / data_name
+    if not (target.exists() and target.samefile(src)):  # the CSV given may be the copy a run wrote before
+        shutil.copyfile(src, target)
     lines = ["schema_version = 1", f"id = {json.dumps(dataset.id)}",
              f"title = {json.dumps(dataset.title.replace(' (no card)', ''))}"]
     if dataset.model:

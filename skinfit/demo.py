@@ -175,6 +175,9 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     todo.sort(key=lambda t: -t[0]["n_rows"])  # larger fits first: the workers finish together
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
          f"datasets ({len(plan) - len(todo)} already done under {out})")
+    for p, path, f in zip(plan, paths, reused):  # the demo's folder is its own: a fit of other settings is
+        if f is None and path.exists():             # replaced, and said so
+            echo(f"  replacing {path}: not made with this demo's seed, cards, data and sampler settings")
     for p in plan:
         extra = f"  [{p['why']}]" if p["why"] else ""
         echo(f"  {p['dataset']:<28} {p['model'] + (' ' + p['group'] if p.get('group') else ''):<30} "

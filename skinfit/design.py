@@ -65,6 +65,7 @@ import pandas as pd
 from scipy import special, stats
 
 from .errors import InputError
+from .outputs import check_outputs
 from .units import NONNEGATIVE, dimension, same_dimension, to_si
 
 __all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
@@ -1038,9 +1039,11 @@ class DesignResult:
                          f"(the EIG nears log of the inner draws): rerun with more inner draws (--inner)")
         return lines
 
-    def write(self, out):
+    def write(self, out, *, overwrite=False):
         """plan.csv (ready to run), candidates.csv, baseline.csv, comparison.csv, sd.csv,
-        design.json (settings and what :func:`load_design` needs), eig.png."""
+        design.json (settings and what :func:`load_design` needs), eig.png (:data:`FILES`). A
+        folder holding an earlier design's files is refused unless ``overwrite``."""
+        check_outputs(out, FILES, command="skinfit design", overwrite=overwrite)
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         self.plan.to_csv(out / "plan.csv", index=False)
@@ -1548,6 +1551,11 @@ def design_section_html(result, figdir):
     return "\n".join(parts)
 
 
+#: The files :meth:`DesignResult.write` writes.
+FILES = ("plan.csv", "candidates.csv", "baseline.csv", "comparison.csv", "sd.csv", "discrimination.csv",
+         "design.json", "eig.png")
+
+
 def cli_design(args):
     """``skinfit design MODEL --candidates FILE --n N [--from FIT] [--params A,B] [--discriminate M ...]
     [--sigma S] [--seed S] [--out DIR]``."""
@@ -1557,7 +1565,8 @@ def cli_design(args):
     if args.n <= 0:
         raise InputError("--n", f"the number of measurements must be > 0 (got {args.n})")
     created = False
-    if args.out:  # made (or refused) before the work, not after it
+    if args.out:  # made (or refused: an earlier design there, unless --overwrite) before the work
+        check_outputs(args.out, FILES, command="skinfit design", overwrite=args.overwrite)
         out = Path(args.out)
         if out.exists() and not out.is_dir():
             raise InputError("--out", f"{out} is a file, not a folder")
@@ -1590,6 +1599,6 @@ def _cli_design_run(args, load_fit, load_model):
                     n_outer=args.outer, n_inner=args.inner)
     print(result.text())
     if args.out:
-        out = result.write(args.out)
+        out = result.write(args.out, overwrite=args.overwrite)
         print(f"\nwritten: {out / 'plan.csv'} (user units), candidates.csv, comparison.csv, sd.csv, eig.png")
     return 0

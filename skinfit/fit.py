@@ -40,6 +40,7 @@ from .units import si_unit
 from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
 from .guardrails import check_run
+from .provenance import input_lines, input_record, inputs_of, warn_shadows
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator", "resolve_inputs"]
 
@@ -166,6 +167,8 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
                     checkpoint_every=checkpoint_every)
     model, dataset, priors = resolve_inputs(model, dataset, priors, units=units)
+    inputs = input_record(model, priors, dataset)  # the files read, and any they hid: said now, not after sampling
+    warn_shadows(inputs, model, priors)
     seed_drawn = rng is None
     if seed_drawn and resume and checkpoint is not None and Path(checkpoint).exists():
         from .checkpoint import load_checkpoint
@@ -211,6 +214,7 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     t_tree = time.perf_counter()
     idata, deferred = _build_tree(post, run, map_result, rng, n_prior_draws, seed=seed, importance=rounds)
     idata.attrs["seed_drawn"] = int(seed_drawn)
+    idata.attrs["inputs"] = json.dumps(inputs)
     now = time.perf_counter()
     idata.attrs["timings"] = json.dumps({"map_s": map_result.seconds,
                                          "start_s": t_start_s if saved is None else 0.0,
@@ -622,6 +626,13 @@ class Fit:
         return json.loads(value) if isinstance(value, str) and value[:1] in "{[" else value
 
     @property
+    def inputs(self) -> dict:
+        """The model card, prior file and data file this fit read: path, sha256, where on the
+        search path each was found and the files of the same id it hid
+        (:func:`skinfit.provenance.inputs_of`)."""
+        return inputs_of(self.attrs)
+
+    @property
     def model_id(self):
         return self.attrs["model_id"]
 
@@ -782,6 +793,7 @@ class Fit:
         seed_text = ("a numpy Generator (not recorded)" if seed < 0 else
                      f"{seed}{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
         lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.attrs['dataset_sha256'][:12]})",
+                 *input_lines(self.attrs),
                  f"seed: {seed_text}",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],

@@ -35,9 +35,10 @@ import pandas as pd
 from .data import Dataset, load_dataset
 from .errors import InputError
 from .fit import fit, load_fit, resolve_inputs
+from .provenance import input_lines, input_record
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
-           "read_index", "index_document",
+           "read_index", "index_document", "read_inputs",
            "record_source", "source_problem", "data_drift"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
@@ -140,7 +141,7 @@ def source_problem(attrs, label, sha256):
 
 
 def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, noise=None,
-           progress=False, ess_target=400, max_steps=20000, **fit_options):
+           progress=False, ess_target=400, max_steps=20000, overwrite=False, writes_card=False, **fit_options):
     """Fit ``model`` separately to each group of ``dataset`` and write one result per group.
 
     Parameters
@@ -150,8 +151,10 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     by : str or list of str
         Grouping column(s), e.g. ``"subject"`` or ``["subject", "material"]``.
     out_dir : path
-        Gets ``<group>/fit.nc``, ``<group>/summary.csv`` and ``index.json``; one holding the
-        results of other inputs is refused (:func:`check_out_dir`).
+        Gets ``<group>/fit.nc``, ``<group>/summary.csv`` and ``index.json``; one holding a run
+        by groups is refused unless ``overwrite`` (:func:`check_out_dir`), as is one holding
+        another kind of result. ``writes_card``: the caller writes the dataset's card to
+        ``out_dir/dataset`` afterwards (that folder is then checked too).
     seed : int, optional
         Base seed; group ``g`` is fitted with ``derive_seed(seed, g)``.  None draws fresh
         entropy, recorded in the index so the run can be repeated.
@@ -167,7 +170,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     dataset = load_dataset(dataset) if from_file else dataset
     model, dataset, priors = resolve_inputs(model, dataset, priors)
     by = [by] if isinstance(by, str) else list(by)
-    check_out_dir(out_dir, model, priors, dataset, by)
+    check_out_dir(out_dir, model, priors, dataset, by, overwrite=overwrite, writes_card=writes_card)
     labels, levels = group_labels(dataset, by)
     base = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
     out_dir = Path(out_dir)
@@ -175,11 +178,15 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     rows = []
     header = {"model": model.id, "dataset": dataset.id, "by": by, "seed": base,
               "dataset_path": card_path(dataset), "dataset_sha256": dataset.sha256, "dataset_is_file": from_file,
-              "model_sha256": model.sha256, "priors_sha256": priors.sha256}
+              "model_sha256": model.sha256, "priors_sha256": priors.sha256,
+              "inputs": input_record(model, priors, dataset)}
     # the lock a plain `skinfit fit --out` takes: two runs on one folder never interleave
     with CheckpointLock(out_dir / "checkpoint.h5"):
-        remove_stale_temps(out_dir)  # a killed run's half-written group files (writer pid dead)
+        # again, holding the lock: a run into this folder that ended since the check above
+        check_out_dir(out_dir, model, priors, dataset, by, overwrite=overwrite, writes_card=writes_card)
+        remove_stale_temps(out_dir, recursive=False)  # a killed run's half-written index (writer pid dead)
         for label in levels:
+            remove_stale_temps(out_dir / group_dir(label), recursive=False)  # and group files: only in its folders
             sub = dataset.subset(labels == label, label)
             group_seed = derive_seed(base, label)
             t0 = time.perf_counter()
@@ -194,6 +201,18 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
                          "path": rel.as_posix()})
             _write_json(out_dir / "index.json", {**header, "groups": rows})
     return pd.DataFrame(rows)
+
+
+def read_inputs(run):
+    """The lines that say which model card, prior file and data file the fits of the run by
+    groups in folder ``run`` read (:func:`skinfit.provenance.input_lines` of its index.json);
+    an index without them (an older skinfit's) says so."""
+    try:
+        doc = json.loads((Path(run) / "index.json").read_text(encoding="utf-8"))
+        return input_lines({"inputs": json.dumps(doc["inputs"]), "model_sha256": doc["model_sha256"],
+                            "priors_sha256": doc["priors_sha256"]})
+    except (OSError, ValueError, KeyError, TypeError):
+        return [f"inputs: not recorded in {Path(run) / 'index.json'}"]
 
 
 _INDEX_KINDS = "expected a `fit --by` index (with 'groups') or a campaign index (a list)"
@@ -321,16 +340,28 @@ def data_drift(fits):
     return messages
 
 
-def check_out_dir(out_dir, model, priors, dataset, by=None):
-    """Refuse, before anything is fitted or written, an output folder that holds results of
-    other inputs: a single fit (``fit.nc``) or a run by groups (``index.json``, ``by`` the
-    grouping columns) made from another model card, prior file or dataset (their sha256 as
-    recorded; a model id where no sha256 was), or grouped otherwise, or the other kind of run,
-    or a campaign's results (its index.json a list of rows). Results of the same inputs (a
-    rerun: another seed or sampler setting) may be replaced.
+def check_out_dir(out_dir, model, priors, dataset, by=None, *, overwrite=False, resume=False, writes_card=False):
+    """Refuse, before anything is fitted or written, an output folder whose results the fit
+    would replace without being asked (one-line InputError, nothing written).
+
+    Always refused: the other kind of run (a single fit's ``fit.nc`` for a run by groups, a run
+    by groups' ``index.json`` for a single fit) and a campaign's results (its index.json a list
+    of rows): the folder would hold two runs' files mixed. A folder holding this kind's result
+    (``fit.nc`` or ``index.json``), its ``summary.csv``, the checkpoint of a single fit
+    (``checkpoint.h5``) or, when ``writes_card`` (a CSV without a card: its card goes to
+    ``OUT/dataset``), a ``dataset`` folder: refused unless ``overwrite`` (replace them) or, for a
+    single fit with a checkpoint, ``resume`` (continue it; :func:`skinfit.fit` then refuses a
+    checkpoint of other inputs). The message says what is there: a fit of which model on which
+    data, and whether it was made from other inputs (another model card, prior file, data or
+    grouping, their sha256 as recorded).
     ``model``, ``priors``, ``dataset``: the Model, PriorSet and Dataset about to be fitted."""
     out_dir = Path(out_dir)
-    single, index = out_dir / "fit.nc", out_dir / "index.json"
+    if overwrite and resume:
+        raise InputError("--resume", "and --overwrite contradict each other: --resume continues the fit in --out, "
+                                     "--overwrite replaces it")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(out_dir, "is a file: --out names the folder the results go into (nothing was written)")
+    single, index, checkpoint = out_dir / "fit.nc", out_dir / "index.json", out_dir / "checkpoint.h5"
     mine, other, held, this = ((single, index, "a run by groups (index.json)", "a single fit") if by is None else
                                (index, single, "a single fit (fit.nc)", "the run by groups"))
     if index.exists() and _is_campaign_index(index):  # neither kind of run of skinfit fit
@@ -338,8 +369,22 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
                                   "another --out (nothing was written)")
     if other.exists():
         raise InputError(out_dir, f"holds {held}: give {this} another --out (nothing was written)")
-    if not mine.exists():
+    ckpt = by is None and checkpoint.exists()
+    if resume and by is None:
+        if ckpt:
+            return  # fit() continues the checkpoint, refusing one of other inputs
+        if mine.exists():
+            raise InputError(out_dir, "holds a finished fit (fit.nc) and no checkpoint to resume: --overwrite to "
+                                      "replace it, or give another --out (nothing was written)")
+    there = [p.name for p in (mine, out_dir / "summary.csv", *((checkpoint,) if by is None else ()),
+                              *((out_dir / "dataset",) if writes_card else ())) if p.exists()]
+    if not there or overwrite:
         return
+    options = "--overwrite to replace it" + (", --resume to continue from its checkpoint" if ckpt else "")
+    if not mine.exists():
+        what = (f"the checkpoint of a fit not finished ({_checkpoint_text(checkpoint)})" if ckpt and
+                there == ["checkpoint.h5"] else f"{', '.join(there)} (of an earlier fit)")
+        raise InputError(out_dir, f"holds {what}: {options}, or give another --out (nothing was written)")
     new = {"model_id": model.id, "model_sha256": model.sha256, "priors_sha256": priors.sha256,
            "dataset_sha256": dataset.sha256}
     try:
@@ -355,13 +400,22 @@ def check_out_dir(out_dir, model, priors, dataset, by=None):
             what = f"a run of {doc['model']} by {', '.join(map(str, doc['by']))}"
     except (InputError, OSError, ValueError, KeyError, TypeError):
         article = "a" if by is None else "an"
-        raise InputError(out_dir, f"holds {article} {mine.name} that skinfit cannot read: give another --out, or "
-                                  "remove it to fit here (nothing was written)") from None
+        raise InputError(out_dir, f"holds {article} {mine.name} that skinfit cannot read: {options}, or give another "
+                                  "--out (nothing was written)") from None
     differ = [k for k in new if k in old and old[k] != new[k]]  # an older index records no card / prior sha256
-    if differ:
-        raise InputError(out_dir, f"holds {what}, made from {_inputs_text(differ)} than this fit of {model.id} on "
-                                  f"{dataset.id}: give another --out, or remove its results to replace them "
-                                  f"(nothing was written)")
+    made = (f", made from {_inputs_text(differ)} than this fit of {model.id} on {dataset.id}" if differ else
+            ", made from the same model card, prior file and data")
+    raise InputError(out_dir, f"holds {what}{made}: {options}, or give another --out (nothing was written)")
+
+
+def _checkpoint_text(path):
+    """How far the checkpoint at ``path`` got, in words (its iteration), or that it is unreadable."""
+    from .checkpoint import load_checkpoint
+
+    try:
+        return f"checkpoint.h5 at step {load_checkpoint(path).iteration}"
+    except Exception:  # noqa: BLE001 - only said in a message: any unreadable file is just named
+        return "checkpoint.h5, unreadable"
 
 
 def _is_campaign_index(index):

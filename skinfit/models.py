@@ -19,7 +19,8 @@ if TYPE_CHECKING:  # names used only in annotations
 import math
 import re
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
@@ -88,6 +89,7 @@ class Model:
     path: str = ""
     sha256: str = ""
     card_text: str = ""
+    file: str = ""  # the absolute path of the card read ("" when not read from a file)
 
     @property
     def forward(self):
@@ -232,7 +234,7 @@ def load_model(name: str | os.PathLike) -> Model:
 
 def _parse_model(path, digest):
     _, text = read_toml(path)
-    model = _parse_model_text(text, _display(path), digest)
+    model = replace(_parse_model_text(text, _display(path), digest), file=str(Path(path).resolve()))
     from .references import check_source
 
     check_source(model.source, model.path, "source")  # keys into references.toml

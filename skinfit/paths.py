@@ -23,7 +23,7 @@ from pathlib import Path
 from .errors import InputError
 
 __all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path", "explicit_search_path",
-           "shipped_root", "user_root", "user_cache_root"]
+           "check_search_path", "where_from", "shipped_root", "user_root", "user_cache_root"]
 
 KINDS = ("models", "priors", "datasets")
 ENV = "SKINFIT_PATH"
@@ -88,10 +88,37 @@ def user_cache_root() -> Path:
     return Path(platformdirs.user_cache_dir("skinfit", appauthor=False))
 
 
+#: What a folder of the search path holds (at least one of them).
+_LAYOUT = (*KINDS, "references.toml")
+
+
+def _given(root):
+    """``root`` (a ``--path`` or ``$SKINFIT_PATH`` folder) if it is a folder of the search path's
+    layout; else an InputError naming it: a mistyped folder would otherwise be skipped in
+    silence, and the files it was meant to supply taken from later folders (the shipped ones)."""
+    if not root.path.exists():
+        raise InputError(root.origin, f"{root.path}: no such folder")
+    if not root.path.is_dir():
+        raise InputError(root.origin, f"{root.path}: not a folder (expected one holding models/, priors/, datasets/)")
+    if not any((root.path / name).exists() for name in _LAYOUT):
+        inside = " (give the folder above it)" if root.path.name in KINDS else ""
+        raise InputError(root.origin, f"{root.path}: holds none of models/, priors/, datasets/, references.toml"
+                         + inside)
+    return root
+
+
+def check_search_path() -> None:
+    """InputError (one line) when a ``--path`` or ``$SKINFIT_PATH`` folder does not exist or does
+    not have the search path's layout: ``skinfit`` checks this before any command runs."""
+    search_path()
+
+
 def search_path() -> list[Root]:
-    """The folders searched, first match wins (see the module docstring)."""
-    roots = [Root(p, "--path") for p in _EXPLICIT]
-    roots += [Root(Path(p).expanduser(), f"${ENV}") for p in os.environ.get(ENV, "").split(os.pathsep) if p]
+    """The folders searched, first match wins (see the module docstring). A ``--path`` or
+    ``$SKINFIT_PATH`` folder that does not exist, is not a folder or holds none of models/,
+    priors/, datasets/ and references.toml is an InputError."""
+    roots = [_given(Root(p, "--path")) for p in _EXPLICIT]
+    roots += [_given(Root(Path(p).expanduser(), f"${ENV}")) for p in os.environ.get(ENV, "").split(os.pathsep) if p]
     roots.append(Root(user_root(), "user"))
     from .registry import plugin_folders  # card folders of installed plug-ins (skinfit.models entry points)
 
@@ -142,6 +169,20 @@ def locate(kind: str, name) -> Path:
     known = ", ".join(entries(kind)) or "none"
     searched = "; ".join(f"{r.path / kind} ({r.origin})" for r in search_path())
     raise InputError(str(name), f"no such {kind[:-1]} (known: {known}; searched: {searched})")
+
+
+def where_from(kind: str, path) -> tuple[str, list[tuple[Root, Path]]]:
+    """Where the card file ``path`` of ``kind`` comes from: the origin of the search-path folder
+    holding it (``--path``, ``$SKINFIT_PATH``, ``user``, ``plug-in``, ``shipped``; ``file`` for
+    a file named by its path outside the search path) and the files of the same id in later
+    folders, which it hides (``(root, file)`` each)."""
+    path = Path(path).resolve()
+    cid = path.parent.name if kind == "datasets" else path.stem
+    found = [(root, card) for root in search_path() for i, card in _cards(kind, root.path).items() if i == cid]
+    for k, (root, card) in enumerate(found):
+        if card.resolve() == path:
+            return root.origin, found[k + 1:]
+    return "file", []
 
 
 def display(path: Path) -> str:

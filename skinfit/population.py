@@ -54,6 +54,7 @@ from .errors import InputError
 from .figure_store import storable
 from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator
 from .hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
+from .outputs import check_outputs
 
 __all__ = ["population", "PopulationResult", "PopulationWarning", "population_tables", "load_population", "subject_digest",
            "load_run", "DrawsFit", "FAMILIES"]
@@ -868,6 +869,10 @@ def _parse_family(items):
     return out
 
 
+#: The files ``skinfit population`` writes into its --out (besides its cache, .cache/).
+FILES = ("population.nc", "population_summary.csv", "population_subjects.csv", "population_effects.csv")
+
+
 def cli_population(args):
     """``skinfit population RUN_DIR``: the population of a ``fit --by`` run or a campaign;
     writes ``population.nc`` (ArviZ tree) and ``population_summary.csv`` /
@@ -879,6 +884,7 @@ def cli_population(args):
     if args.params:
         params = [p for item in args.params for p in item.split(",") if p]
     out = Path(args.out) if args.out else Path(args.run) / "population"
+    check_outputs(out, FILES, command="skinfit population", overwrite=args.overwrite)  # before the sampling
     with warnings.catch_warnings():  # the warnings are printed below, with the result
         warnings.simplefilter("ignore", PopulationWarning)
         result = population(args.run, params, family=_parse_family(args.family), correlated=args.correlated,

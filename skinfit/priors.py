@@ -15,6 +15,7 @@ if TYPE_CHECKING:  # names used only in annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
@@ -152,6 +153,7 @@ class PriorSet:
     path: str = ""
     sha256: str = ""
     text: str = ""
+    file: str = ""  # the absolute path of the file read ("" when not read from a file)
 
     def __getitem__(self, name):
         return self.priors[name]
@@ -258,7 +260,7 @@ def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet
     if not priors:
         raise InputError(where, "no priors defined")
     return PriorSet(id=doc.get("id", path.stem), model=model, priors=MappingProxyType(priors),
-                    path=where, sha256=sha256_file(path), text=text)
+                    path=where, sha256=sha256_file(path), text=text, file=str(Path(path).resolve()))
 
 
 def list_priors() -> list[str]:

@@ -878,12 +878,25 @@ def claim_report_folder(out):
 
 
 def _recorded_outputs(out):
-    """The files the previous report into ``out`` wrote at its top level (from its marker)."""
+    """The files the previous report into ``out`` wrote at its top level (from its marker) and
+    still holding what it wrote (their sha256 as recorded): a file the user has put in its place
+    since is not the report's to remove."""
     try:
-        names = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8")).get("files", [])
+        doc = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))
+        names, sha256 = doc.get("files", []), doc.get("sha256")
     except (OSError, ValueError, AttributeError):
         return []
-    return [n for n in names if isinstance(n, str) and n == Path(n).name and not n.startswith(".")]
+    names = [n for n in names if isinstance(n, str) and n == Path(n).name and not n.startswith(".")]
+    if not isinstance(sha256, dict):  # a marker of an older skinfit: its names alone
+        return names
+    return [n for n in names if sha256.get(n) is not None and _sha256_of(out / n) == sha256[n]]
+
+
+def _sha256_of(path):
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def _record_outputs(out, before, start):
@@ -896,7 +909,8 @@ def _record_outputs(out, before, start):
     if before is not None:
         files = sorted(p.name for p in out.iterdir() if p.is_file() and not p.name.startswith(".")
                        and (p.name not in before or p.stat().st_mtime_ns >= start))
-    doc = {"written_by": "skinfit report: the next report into this folder rewrites it", "files": files}
+    doc = {"written_by": "skinfit report: the next report into this folder rewrites it", "files": files,
+           "sha256": {name: _sha256_of(out / name) for name in files}}
     (out / REPORT_MARKER).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
 
 

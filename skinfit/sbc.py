@@ -33,6 +33,7 @@ from scipy import stats
 from .data import Dataset, list_datasets, load_dataset
 from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
+from .outputs import check_outputs
 from .posterior import Posterior
 from .priors import PriorSet, load_priors
 
@@ -312,9 +313,15 @@ def markdown_table(result):
     return "\n".join(lines)
 
 
-def write_sbc(result, out):
-    """Write ``ranks.csv``, ``sbc.csv`` (tests), ``runs.csv``, ``sbc.md``, ``sbc.json`` and
-    ``ranks.png`` under ``out``."""
+#: The files :func:`write_sbc` writes.
+FILES = ("ranks.csv", "truth.csv", "sbc.csv", "runs.csv", "sbc.json", "sbc.md", "ranks.png")
+
+
+def write_sbc(result, out, *, overwrite=False):
+    """Write ``ranks.csv``, ``truth.csv``, ``sbc.csv`` (tests), ``runs.csv``, ``sbc.md``,
+    ``sbc.json`` and ``ranks.png`` under ``out``; a folder holding an earlier run's files is
+    refused unless ``overwrite``."""
+    check_outputs(out, FILES, command="skinfit sbc", overwrite=overwrite)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     result.ranks.to_csv(out / "ranks.csv", index_label="sim")
@@ -333,6 +340,8 @@ def write_sbc(result, out):
 def cli_sbc(args):
     """``skinfit sbc MODEL [--dataset D] [--n-sims N] [--draws L] [--rows N] [--seed S] [--jobs J]
     [--out DIR]``."""
+    if args.out:  # an earlier run there: refused before the simulations, unless --overwrite
+        check_outputs(args.out, FILES, command="skinfit sbc", overwrite=args.overwrite)
     result = run_sbc(args.model, args.dataset, n_sims=args.n_sims, seed=args.seed, n_draws=args.draws,
                      n_rows=args.rows, ess_target=args.ess, max_steps=args.max_steps, jobs=args.jobs,
                      progress=print)
@@ -340,5 +349,5 @@ def cli_sbc(args):
     print(f"\n{len(result.ranks)} simulations; {'all parameters pass' if result.passed else 'NOT calibrated'} "
           f"at the {result.settings['alpha']:.0%} level")
     if args.out:
-        print(f"written: {write_sbc(result, args.out)}")
+        print(f"written: {write_sbc(result, args.out, overwrite=args.overwrite)}")
     return 0 if result.passed else 1

@@ -237,9 +237,9 @@ def test_class2_stale_temp_files_removed_only_when_their_writer_is_dead(tmp_path
         mine = Path(temp_file(group / "fit.nc"))  # this process: alive
         assert mine.name.startswith(f".fit.nc.{_host()}.{os.getpid()}-") and mine.name.endswith(".tmp")
         assert Path(temp_file(group / "fit.nc")) != mine  # unique per write
-        stale = group / f".fit.nc.{_host()}.{dead.pid}-abc123.tmp"
-        running = group / f".fit.nc.{_host()}.{live.pid}-abc123.tmp"
-        elsewhere = group / f".fit.nc.otherhost.{dead.pid}-abc123.tmp"
+        stale = group / f".fit.nc.{_host()}.{dead.pid}-abc12345.tmp"
+        running = group / f".fit.nc.{_host()}.{live.pid}-abc12345.tmp"
+        elsewhere = group / f".fit.nc.otherhost.{dead.pid}-abc12345.tmp"
         foreign = group / "notes.tmp"
         for p in (stale, running, elsewhere, foreign):
             p.write_text("partial")

@@ -207,7 +207,7 @@ def test_class6_read_only_run_directory_gives_one_line(saved_fit, tmp_path, caps
 
     monkeypatch.setattr(fit_module, "fit", _no_fit)
     monkeypatch.setattr(importlib.import_module("skinfit.checkpoint").CheckpointLock, "__enter__", read_only)
-    assert main(["fit", MODEL, "electroadhesion_synthetic", "--out", str(run), "--quiet"]) == 2
+    assert main(["fit", MODEL, "electroadhesion_synthetic", "--out", str(run), "--quiet", "--overwrite"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Read-only file system (errno 30); files written before are unchanged" in err
     assert (run / "fit.nc").read_bytes() == before

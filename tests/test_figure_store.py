@@ -2,6 +2,7 @@
 and never reused for other content, other code, an altered stored file or a user's own model."""
 
 import hashlib
+import json
 from pathlib import Path
 
 import pytest
@@ -12,9 +13,10 @@ from skinfit.fit import load_fit
 
 @pytest.fixture
 def store(tmp_path, monkeypatch):
+    """The store's own folder (its entries) under the folder $SKINFIT_FIGURE_STORE names."""
     folder = tmp_path / "store"
     monkeypatch.setenv("SKINFIT_FIGURE_STORE", str(folder))
-    return folder
+    return folder / figure_store.FOLDER
 
 
 @pytest.fixture
@@ -133,3 +135,81 @@ def test_a_comparison_chart_is_copied_into_a_new_report_folder(ea_fit, store, tm
     assert _digest(first) == _digest(copied)
     report.write_report([ea_fit], tmp_path / "c", comparison=table.assign(log_z=[512.25, 499.0]))
     assert len(calls) == 2
+
+
+# ---- class: a cache deletes what it did not write ---------------------------------------------
+def _user_files(folder):
+    """A folder of the user's: a large PDF, files in two-letter sub-folders (as the store's
+    entries are named), one set shaped exactly like a stored entry, with a record of its
+    sha256s. Returns {path: bytes}."""
+    folder.mkdir(parents=True, exist_ok=True)
+    files = {folder / "thesis.pdf": b"%PDF-1.7 " + bytes(range(256)) * 64,
+             folder / "ab" / "figure.png": b"\x89PNG user figure", folder / "ab" / "notes.json": b'{"mine": 1}',
+             folder / "cd" / "paper.pdf": b"%PDF user paper", folder / "summary.csv": b"a,b\n1,2\n"}
+    digest = hashlib.sha256(b"looks like a stored entry").hexdigest()
+    entry = {folder / digest[:2] / f"{digest}{s}": f"user {s}".encode() for s in (".png", ".pdf")}
+    files |= entry
+    files[folder / digest[:2] / f"{digest}.json"] = json.dumps(
+        {p.suffix: hashlib.sha256(b).hexdigest() for p, b in entry.items()}).encode()
+    for path, data in files.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return files
+
+
+def _unchanged(files):
+    return {p: p.read_bytes() if p.is_file() else None for p in files} == files
+
+
+def test_class_cache_deletes_only_what_it_wrote_user_files_survive_every_operation(ea_fit, tmp_path, monkeypatch):
+    """$SKINFIT_FIGURE_STORE pointed at a folder of the user's files: storing, reusing and
+    trimming figures (to 0 MiB too) leave every one of them as it was. Before: trimming removed
+    every .png/.pdf/.json in any two-letter sub-folder, and the 'least recently used' user files
+    first."""
+    mine = tmp_path / "papers"
+    files = _user_files(mine)
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", str(mine))
+    monkeypatch.setattr(report, "MAX_FIGURE_WORKERS", 1)
+    _render(ea_fit, tmp_path / "a")  # drawn and stored
+    _render(ea_fit, tmp_path / "b")  # reused
+    assert _unchanged(files)
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE_MB", "0")  # every report now trims the store to nothing
+    _render(ea_fit, tmp_path / "c")
+    _render(ea_fit, tmp_path / "d", func="plot_rank")
+    assert _unchanged(files)
+
+
+def test_class_cache_trims_its_own_entries_and_never_an_altered_file(ea_fit, store, tmp_path, monkeypatch):
+    """Trimming to 0 MiB removes every entry the store wrote, but a file the user put in the
+    place of a stored one (other content) stays: the store removes only what it can prove it wrote."""
+    src = tmp_path / "fig.png"
+    digests = [hashlib.sha256(k.encode()).hexdigest() for k in ("one", "two")]
+    for k, digest in enumerate(digests):
+        src.write_bytes(bytes([k]) * 3000)
+        src.with_suffix(".pdf").write_bytes(bytes([k]) * 3000)
+        figure_store.put(digest, src)
+    altered = store / digests[1][:2] / f"{digests[1]}.png"
+    altered.write_bytes(b"the user's own figure")
+    stray = store / "ab" / "stray.png"
+    stray.parent.mkdir(exist_ok=True)
+    stray.write_bytes(b"a user file inside the store's folder")
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE_MB", "0")
+    figure_store.trim()
+    left = sorted(p.relative_to(store).as_posix() for p in store.rglob("*") if p.is_file())
+    assert left == sorted([figure_store.MARKER, altered.relative_to(store).as_posix(), "ab/stray.png"])
+    assert altered.read_bytes() == b"the user's own figure" and not figure_store.fetch(digests[1], tmp_path / "x.png")
+
+
+def test_class_cache_a_folder_not_the_stores_is_neither_written_nor_trimmed(ea_fit, tmp_path, monkeypatch, drawn):
+    """A folder with the store's name that the store did not claim (no marker, other files in
+    it): figures are drawn and not stored, the folder is left as it was, and a warning says why."""
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", str(tmp_path / "cache"))
+    files = _user_files(tmp_path / "cache" / figure_store.FOLDER)
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE_MB", "0")
+    with pytest.warns(UserWarning, match="holds files the figure store did not write"):
+        _render(ea_fit, tmp_path / "a")
+    _render(ea_fit, tmp_path / "b")
+    assert drawn == [0, 0], "nothing stored there, so nothing reused"
+    figure_store.trim()
+    assert _unchanged(files)
+    assert not (tmp_path / "cache" / figure_store.FOLDER / figure_store.MARKER).exists()

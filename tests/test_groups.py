@@ -199,16 +199,20 @@ def test_class1_report_check_names_fits_whose_data_changed(odd_run):
     assert len(messages) == 3 and all("which now has" in m and "not of the current data" in m for m in messages)
 
 
-def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_path, refused):
-    """`skinfit fit --out DIR`: a fit or a run by groups there made from another model, prior
-    file or data, or grouped otherwise, or the other kind of run, is refused with one line and
-    not a byte of it changed; the same inputs (a rerun, another seed) replace it."""
+def test_class_results_overwritten_an_out_holding_a_fit_is_refused_unless_overwrite(tmp_path, refused):
+    """`skinfit fit --out DIR` (single or --by) into a folder holding a result: refused with one
+    line naming --overwrite (and --resume where a checkpoint can be continued), saying whether
+    the result there was made from other inputs, and not a byte of it changed; the other kind
+    of run is refused even with --overwrite; --overwrite replaces. (Before: a rerun of the same
+    inputs replaced the result without a word.)"""
     from skinfit.fit import load_fit
 
     path, _ = write_population(tmp_path / "a", n_subjects=2)
     other, _ = write_population(tmp_path / "b", n_subjects=2, truths={"S01": 0.2, "S02": 0.8})
     quick = ["--ess", "50", "--max-steps", "300", "--quiet"]
     single, run = tmp_path / "single", tmp_path / "run"
+    tail = ": --overwrite to replace it{}, or give another --out (nothing was written)"
+    resumable, by_run = tail.format(", --resume to continue from its checkpoint"), tail.format("")
 
     def holds(argv, out, what):
         refused(argv, out, f"holds {what}")
@@ -216,40 +220,82 @@ def test_an_out_holding_results_of_other_inputs_is_refused_before_fitting(tmp_pa
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
         assert main(["fit", "electroadhesion_coulomb", str(path), "--out", str(single), "--seed", "1", *quick]) == 0
-        after = ("than this fit of {} on population: give another --out, or remove its results to replace them "
-                 "(nothing was written)")
+        holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(single), "--seed", "2", *quick], single,
+              "a fit of electroadhesion_coulomb on population, made from the same model card, prior file and data"
+              + resumable)
+        after = " than this fit of {} on population"
         holds(["fit", "electroadhesion", str(path), "--out", str(single), *quick], single,
-                "a fit of electroadhesion_coulomb on population, made from another model " + after.format("electroadhesion"))
+              "a fit of electroadhesion_coulomb on population, made from another model"
+              + after.format("electroadhesion") + resumable)
         holds(["fit", "electroadhesion_coulomb", str(other), "--out", str(single), *quick], single,
-                "a fit of electroadhesion_coulomb on population, made from other data "
-                + after.format("electroadhesion_coulomb"))
-        holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(single), *quick], single,
-                "a single fit (fit.nc): give the run by groups another --out (nothing was written)")
-        assert main(["fit", "electroadhesion_coulomb", str(path), "--out", str(single), "--seed", "2", *quick]) == 0
-        assert int(load_fit(single / "fit.nc").attrs["seed"]) == 2  # a rerun replaces the fit
+              "a fit of electroadhesion_coulomb on population, made from other data"
+              + after.format("electroadhesion_coulomb") + resumable)
+        holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(single), "--overwrite",
+               *quick], single, "a single fit (fit.nc): give the run by groups another --out (nothing was written)")
+        assert main(["fit", "electroadhesion_coulomb", str(path), "--out", str(single), "--seed", "2", "--overwrite",
+                     *quick]) == 0
+        assert int(load_fit(single / "fit.nc").attrs["seed"]) == 2  # replaced, as asked
 
-        assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), *quick]) == 0
+        assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), "--seed", "1",
+                     *quick]) == 0
+        holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), *quick], run,
+              "a run of electroadhesion_coulomb by subject, made from the same model card, prior file and data"
+              + by_run)
         holds(["fit", "electroadhesion", str(path), "--by", "subject", "--out", str(run), *quick], run,
-                "a run of electroadhesion_coulomb by subject, made from another model "
-                + after.format("electroadhesion"))
+              "a run of electroadhesion_coulomb by subject, made from another model" + after.format("electroadhesion")
+              + by_run)
         from skinfit.priors import load_priors
 
         (tmp_path / "priors.toml").write_text(load_priors("electroadhesion_coulomb").text + "\n# edited\n")
         holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--priors",
-                 str(tmp_path / "priors.toml"), "--out", str(run), *quick], run,
-                "a run of electroadhesion_coulomb by subject, made from another prior file "
-                + after.format("electroadhesion_coulomb"))
+               str(tmp_path / "priors.toml"), "--out", str(run), *quick], run,
+              "a run of electroadhesion_coulomb by subject, made from another prior file"
+              + after.format("electroadhesion_coulomb") + by_run)
         holds(["fit", "electroadhesion_coulomb", str(path), "--by", "voltage", "--out", str(run), *quick], run,
-                "a run of electroadhesion_coulomb by subject, made from another grouping "
-                + after.format("electroadhesion_coulomb"))
-        holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(run), *quick], run,
-                "a run by groups (index.json): give a single fit another --out (nothing was written)")
-        assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), *quick]) == 0
+              "a run of electroadhesion_coulomb by subject, made from another grouping"
+              + after.format("electroadhesion_coulomb") + by_run)
+        holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(run), "--overwrite", *quick], run,
+              "a run by groups (index.json): give a single fit another --out (nothing was written)")
+        assert main(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--out", str(run), "--seed", "2",
+                     "--overwrite", *quick]) == 0
+        assert json.loads((run / "index.json").read_text())["seed"] == 2
         damaged = tmp_path / "damaged"
         damaged.mkdir()
         (damaged / "fit.nc").write_bytes(b"not a netCDF file")
         holds(["fit", "electroadhesion_coulomb", str(path), "--out", str(damaged), *quick], damaged,
-                "a fit.nc that skinfit cannot read: give another --out, or remove it to fit here (nothing was written)")
+              "a fit.nc that skinfit cannot read" + by_run)
+
+
+def test_class_results_overwritten_an_unfinished_fit_is_continued_or_replaced_only_when_asked(tmp_path, refused):
+    """A folder holding only the checkpoint of a fit that did not finish (killed): a plain rerun
+    is refused (it would start afresh over hours of sampling), naming --resume and --overwrite;
+    --resume of a finished fit without a checkpoint is refused rather than started afresh over it;
+    a user's summary.csv in --out is not replaced without --overwrite."""
+    from skinfit.checkpoint import load_checkpoint
+
+    out = tmp_path / "run"
+    argv = ["fit", "electroadhesion_coulomb", "electroadhesion_synthetic", "--out", str(out), "--seed", "1",
+            "--ess", "50", "--max-steps", "300", "--quiet"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        assert main(argv) == 0
+    steps = load_checkpoint(out / "checkpoint.h5").iteration
+    (out / "fit.nc").unlink()
+    (out / "summary.csv").unlink()
+    refused(argv, out, f"holds the checkpoint of a fit not finished (checkpoint.h5 at step {steps}): --overwrite to "
+                       "replace it, --resume to continue from its checkpoint, or give another --out (nothing was written)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        assert main([*argv, "--resume"]) == 0
+    (out / "checkpoint.h5").unlink()
+    refused([*argv, "--resume"], out, "holds a finished fit (fit.nc) and no checkpoint to resume: --overwrite to "
+                                      "replace it, or give another --out (nothing was written)")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "summary.csv").write_text("my,table\n")
+    refused([*argv[:3], "--out", str(mine), *argv[5:]], mine,
+            "holds summary.csv (of an earlier fit): --overwrite to replace it, or give another --out (nothing was "
+            "written)")
 
 
 @pytest.mark.parametrize("text, why", [("[]", "not the index.json of `skinfit fit --by`"),
