@@ -309,6 +309,8 @@ def build_parser():
     s.add_argument("campaign", help="campaign TOML file")
     s.add_argument("--scheduler", help="Dask scheduler: tcp://HOST:PORT, or 'local' for a LocalCluster")
     s.add_argument("--workers", type=_COUNT, default=None, help="local worker processes (default: cores)")
+    s.add_argument("--threads", type=_COUNT, default=None, help="BLAS/OpenMP threads per fit (default 1, "
+                   "unless OMP_NUM_THREADS or the like is set)")
     s.add_argument("--json", action="store_true", help="print the index as JSON (progress goes to stderr)")
     s.set_defaults(func=_lazy("skinfit.campaign", "cli_campaign"))
     s = sub.add_parser("population", help="population distribution over per-subject fits (a --by run or a campaign)")
