@@ -179,6 +179,10 @@ def _cmd_fit(args):
             print(index.to_json(orient="records", indent=2))
         else:
             print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
+        failed = int((index["status"] != "done").sum())
+        if failed:  # as a campaign: the other groups' results kept, exit 1
+            print(f"skinfit: {failed} of {len(index)} group fit(s) failed, see above", file=sys.stderr)
+            return 1
         warned = int((~index["converged"].astype(bool) | (index["warnings"] > 0)).sum())
         if args.strict and warned:  # as for a single fit: results kept, exit 3
             print(f"skinfit: --strict: {warned} group problem(s) (not converged or warned), see above",

@@ -22,6 +22,8 @@ parameters and two tests each, the chance that a calibrated pipeline fails somew
 
 import json
 import math
+import multiprocessing
+import threading
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +37,7 @@ from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
 from .posterior import Posterior
 from .priors import PriorSet, load_priors
+from .workers import forkable
 
 __all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "cli_sbc"]
 
@@ -221,11 +224,20 @@ def _run_one(item):
 
 
 def _map(job, items, jobs):
-    """``job`` over ``items`` in order, in ``jobs`` processes (forked: no re-import per task)."""
+    """``job`` over ``items`` in order, in ``jobs`` processes (forked: no re-import per task),
+    never forked from a process with other threads (:func:`skinfit.workers.forkable`): there
+    one at a time in this process, with a warning."""
     if jobs is None or jobs <= 1 or len(items) <= 1:
         yield from map(job, items)
         return
-    import multiprocessing
+    if not forkable():
+        why = (f"this process runs {threading.active_count() - 1} other thread(s) (a notebook kernel, a Dask client, "
+               "...) and forking it could deadlock the workers" if "fork" in multiprocessing.get_all_start_methods()
+               else "this platform cannot fork workers")
+        warnings.warn(f"SBC: {why}: the {len(items)} simulations run here one at a time (run `skinfit sbc --jobs N` "
+                      "from a shell for parallel ones)", UserWarning, stacklevel=3)
+        yield from map(job, items)
+        return
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = multiprocessing.get_context("fork")

@@ -11,6 +11,7 @@ each fit 54% slower (16 cores; bench/results/campaign.md).
 
 import multiprocessing
 import os
+import threading
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -22,7 +23,7 @@ from .checkpoint import watch_parent
 from .errors import InputError, WorkerError, portable, require_optional
 
 __all__ = ["THREAD_VARIABLES", "SCHEMES", "check_scheduler", "check_count", "worker_threads", "limited_threads",
-           "thread_count", "run_isolated"]
+           "thread_count", "run_isolated", "collect", "crossing", "forkable"]
 
 #: Environment variables by which a user sets the threads of BLAS/OpenMP libraries; any of them
 #: set in a worker's environment (and no ``threads`` given) leaves its libraries as they are.
@@ -88,6 +89,18 @@ def limited_threads(threads=None):
 def thread_count():
     """The most threads any BLAS/OpenMP library of this process has now (None: none loaded)."""
     return max((lib["num_threads"] for lib in threadpool_info()), default=None)
+
+
+def forkable():
+    """True when this process may fork workers: POSIX fork exists and no other thread runs here.
+
+    A process that forks while other threads run (a notebook kernel's, a Dask client's, a
+    caller's) hands its child every lock those threads held, held forever: the child may
+    deadlock, and Python warns (DeprecationWarning "This process is multi-threaded, use of
+    fork() may lead to deadlocks in the child").  The report's figure workers and SBC's
+    simulation workers are forked only from a process without other threads (else their work
+    runs in the calling process)."""
+    return "fork" in multiprocessing.get_all_start_methods() and threading.active_count() == 1
 
 
 def crossing(target, *args):

@@ -197,3 +197,14 @@ def test_campaign_imports_without_the_unix_resource_module():
             "print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+def test_forkable_only_without_other_threads():
+    """In a new interpreter (no thread but the main one): forkable; with a thread started, not;
+    after it ends, forkable again."""
+    code = ("import threading; from skinfit.workers import forkable\n"
+            "a = forkable(); e = threading.Event(); t = threading.Thread(target=e.wait); t.start()\n"
+            "b = forkable(); e.set(); t.join(); print(a, b, forkable())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    expected = "True False True" if "fork" in multiprocessing.get_all_start_methods() else "False False False"
+    assert out.stdout.strip() == expected, out.stderr
