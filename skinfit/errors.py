@@ -83,7 +83,7 @@ def require_optional(module, extra):
 
 class WorkerError(Portable, RuntimeError):
     """An exception raised in a worker process that could not be sent back as itself (it, or
-    an attribute of it, does not pickle): its class name (``kind``) and message, one line."""
+    an attribute of it, does not pickle): its class name (``kind``) and message."""
 
     def __init__(self, kind, message):
         super().__init__(message)

@@ -37,7 +37,7 @@ from .errors import ConvergenceWarning, InputError
 from .models import Model, load_model
 from .posterior import Posterior
 from .priors import PriorSet, load_priors
-from .workers import forkable
+from .workers import check_count, forkable
 
 __all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "cli_sbc"]
 
@@ -146,6 +146,7 @@ def run_sbc(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_
     -------
     SBCResult
     """
+    check_count(jobs, "jobs")  # a count >= 1 or None, before any work
     model = model if isinstance(model, Model) else load_model(model)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
     fit_priors = priors if fit_priors is None else (

@@ -5,8 +5,9 @@ Threads: a fit in a worker runs with its BLAS and OpenMP thread pools limited (t
 the ``threads`` the user gives (``skinfit campaign --threads``, a campaign file's ``threads``);
 when none is given, to 1, unless the worker's environment sets one of :data:`THREAD_VARIABLES`
 (e.g. ``OMP_NUM_THREADS``), which then rules.  One worker per core with one thread each: a fit's
-arrays are small (walkers x rows), and N workers each starting N BLAS threads on N cores made
-each fit 54% slower (16 cores; bench/results/campaign.md).
+arrays are small (walkers x rows), and N workers each running N BLAS threads on N cores
+oversubscribe them (16 workers on 16 cores ran each fit 54% slower than one worker, as reported
+in issue 39; 2 workers on 2 cores: bench/results/campaign.md).
 """
 
 import multiprocessing

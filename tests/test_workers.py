@@ -208,3 +208,16 @@ def test_forkable_only_without_other_threads():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     expected = "True False True" if "fork" in multiprocessing.get_all_start_methods() else "False False False"
     assert out.stdout.strip() == expected, out.stderr
+
+
+@pytest.mark.parametrize("entry", ["run_sbc", "run_demo"])
+@pytest.mark.parametrize("jobs", [0, -2, "2", 1.5, True])
+def test_process_counts_of_the_python_entry_points_are_checked_before_any_work(entry, jobs, tmp_path):
+    from skinfit.demo import run_demo
+    from skinfit.sbc import run_sbc
+
+    call = {"run_sbc": lambda: run_sbc("electroadhesion_coulomb", n_sims=2, jobs=jobs),
+            "run_demo": lambda: run_demo(tmp_path / "d", tmp_path / "r", jobs=jobs)}[entry]
+    with pytest.raises(InputError, match=r"jobs: expected an integer >= 1 \(got "):
+        call()
+    assert not list(tmp_path.iterdir())
