@@ -44,8 +44,8 @@ def check_scheduler(value, where="--scheduler", field=None, *, need_dask=True):
         return None
     expected = (f"expected 'local' or a Dask scheduler's address like tcp://HOST:PORT (schemes: "
                 f"{', '.join(SCHEMES)}; got {value!r})")
-    if not isinstance(value, str):
-        raise InputError(where, expected, field=field)
+    if not isinstance(value, str) or not value.isprintable() or any(c.isspace() for c in value):
+        raise InputError(where, expected, field=field)  # (urlsplit would drop a tab or newline unseen)
     if value != "local":
         try:
             parts = urlsplit(value)

@@ -169,7 +169,8 @@ def test_worker_thread_limit_is_one_unless_the_user_sets_it(monkeypatch):
 # ---- the executor is checked before any work ---------------------------------------------------
 
 @pytest.mark.parametrize("value", ["banana", "banana://host:8786", "tcp://host", "tcp://:8786", "tcp://host:port",
-                                   "tcp://host:99999", "", "http://host:80", "tcp://host:8786/x", 8786])
+                                   "tcp://host:99999", "", "http://host:80", "tcp://host:8786/x", 8786,
+                                   "tcp://ho\nst:8786", "tcp://host:8786\t", " tcp://host:8786"])
 def test_scheduler_that_is_no_address_is_refused_in_one_line(value):
     with pytest.raises(InputError, match=r"^--scheduler: expected 'local' or a Dask scheduler's address") as info:
         check_scheduler(value)
