@@ -63,8 +63,10 @@ thread counts are checked before anything is written (a Dask scheduler needs the
 A failing fit fails alone: its error (class and one-line message) goes to the index and the log,
 every other fit runs and is saved, and a rerun skips the saved ones.  Every exception a worker
 raises crosses back to this process (:func:`skinfit.errors.portable`); a worker process that
-dies (killed, out of memory, a crash in compiled code) breaks the pool and every fit in it: those
-are run again one at a time, each in a fresh process, so only the fit that kills its worker fails.
+dies (killed, out of memory, a crash in compiled code) breaks the pool and every fit not yet
+finished: those that may have been running are run again one at a time, each in a fresh process,
+the rest in a fresh pool, so only the fit that kills its worker fails
+(:func:`skinfit.workers.run_isolated`).
 
 Threads: each fit runs with its BLAS and OpenMP thread pools limited to ``threads``
 (``--threads``, else the file's); when neither is given, to 1, unless the worker's environment

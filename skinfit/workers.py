@@ -122,23 +122,29 @@ def run_isolated(target, items, workers, finish):
     ``finish(key, error=exception)`` (:func:`collect`).
 
     A worker that dies (killed, out of memory, a crash in compiled code) breaks the pool and
-    fails every item then in it with BrokenProcessPool: those run again one at a time, each in a
-    fresh process, so that only an item that kills its worker when run alone fails."""
+    fails every item not yet finished with BrokenProcessPool.  The pool hands items out in
+    submission order, at most ``2 workers + 1`` at a time (running and queued), so only the
+    first ``2 workers + 1`` of those can have been running: each runs again alone, in a fresh
+    process (one that kills its worker then fails), and the rest again in a fresh pool."""
     def pool(n):
         return ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=watch_parent, initargs=(os.getpid(),))
 
-    broken = []
-    with pool(workers) as executor:
-        futures = {executor.submit(target, item): key for key, item in items.items()}
-        for fut in as_completed(futures):
-            if isinstance(fut.exception(), BrokenProcessPool):
-                broken.append(futures[fut])
-            else:
-                collect(fut, futures[fut], finish)
-    for key in broken:
-        with pool(1) as executor:
-            collect(executor.submit(target, items[key]), key, finish)
+    keys = list(items)
+    while keys:
+        broken = set()
+        with pool(min(workers, len(keys))) as executor:
+            futures = {executor.submit(target, items[key]): key for key in keys}
+            for fut in as_completed(futures):
+                if isinstance(fut.exception(), BrokenProcessPool):
+                    broken.add(futures[fut])
+                else:
+                    collect(fut, futures[fut], finish)
+        keys = [key for key in keys if key in broken]  # submission order
+        suspects, keys = keys[:2 * workers + 1], keys[2 * workers + 1:]
+        for key in suspects:
+            with pool(1) as executor:
+                collect(executor.submit(target, items[key]), key, finish)
 
 
 def collect(future, key, finish):
