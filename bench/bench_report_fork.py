@@ -37,10 +37,11 @@ print(f"{wall:.2f} {forks} {skinfit.__file__}")
 
 
 def one(src, mode, fits, out):
+    fits = [Path(f).resolve() for f in fits]
     env = {**os.environ, "MPLBACKEND": "Agg", "SKINFIT_FIGURE_STORE": "off", "PYTHONPATH": str(src)}
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     text = subprocess.run([sys.executable, "-c", CHILD, mode, str(out), *map(str, fits)], env=env, check=True,
-                          capture_output=True, text=True).stdout.split()
+                          capture_output=True, text=True, cwd=out.parent).stdout.split()  # not this checkout's folder
     assert Path(text[2]).resolve().is_relative_to(Path(src).resolve()), text
     return float(text[0]), int(text[1])
 
