@@ -12,6 +12,7 @@ The campaign file (``campaigns/example.toml`` is a working example)::
     by = ["voltage"]                 # optional: fit each level of these columns separately
     scheduler = "local"              # optional: "local" (Dask LocalCluster) or "tcp://HOST:PORT"
     workers = 2                      # optional: local worker processes (default: CPU count)
+    threads = 1                      # optional: BLAS/OpenMP threads per fit (default: see below)
 
     [fit]                            # optional options of every fit
     ess = 200                        # minimum effective sample size (default 400)
@@ -56,44 +57,63 @@ Executors: local processes (``concurrent.futures.ProcessPoolExecutor``, spawn) b
 the same file system (they read the cards and datasets, and write the results, themselves).
 Local workers (processes and our LocalCluster's) end when the campaign's process dies, even by
 SIGKILL.  Dask keys hash the whole task (:func:`task_key`), so campaigns sharing a scheduler
-never share a task unless it is the same fit into the same file.
+never share a task unless it is the same fit into the same file.  The scheduler, worker and
+thread counts are checked before anything is written (a Dask scheduler needs the ``dask`` extra).
+
+A failing fit fails alone: its error (class and one-line message) goes to the index and the log,
+every other fit runs and is saved, and a rerun skips the saved ones.  Every exception a worker
+raises crosses back to this process (:func:`skinfit.errors.portable`); a worker process that
+dies (killed, out of memory, a crash in compiled code) breaks the pool and every fit not yet
+finished: those that may have been running are run again one at a time, each in a fresh process,
+the rest in a fresh pool, so only the fit that kills its worker fails
+(:func:`skinfit.workers.run_isolated`).
+
+Threads: each fit runs with its BLAS and OpenMP thread pools limited to ``threads``
+(``--threads``, else the file's); when neither is given, to 1, unless the worker's environment
+sets one of :data:`skinfit.workers.THREAD_VARIABLES` (e.g. ``OMP_NUM_THREADS``), which then
+rules (:mod:`skinfit.workers`).  The index's ``threads`` column: the most threads a BLAS/OpenMP
+library of the worker had as the fit ended.
 """
 
 import hashlib
 import json
-import multiprocessing
 import os
-import resource
 import socket
 import sys
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+try:  # Unix only (Windows has none): a worker's peak memory, else not recorded (NaN)
+    import resource
+except ImportError:
+    resource = None
+
 from ._toml import find_file, read_toml, require
-from .checkpoint import CheckpointLock, remove_stale_temps, replace_atomic, watch_parent
+from .checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from .data import load_dataset
-from .errors import ConvergenceWarning, InputError
+from .errors import ConvergenceWarning, InputError, error_line, require_optional
 from .fit import fit
 from .groups import (_write_json, check_name, derive_seed, group_dir, group_labels, index_document, inside,
                      record_source, source_problem)
 from .models import NOISE_MODELS, load_model
 from .priors import load_priors
 from .sampling import sampler_settings
+from .workers import check_count, check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
 
 __all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit", "cli_campaign"]
 
-_TOP_KEYS = {"schema_version", "seed", "out", "models", "datasets", "by", "scheduler", "workers",
+_TOP_KEYS = {"schema_version", "seed", "out", "models", "datasets", "by", "scheduler", "workers", "threads",
              "fit", "priors", "split"}
 _FIT_KEYS = {"ess": (float, "ess_target"), "max_steps": (int, "max_steps"), "noise": (str, "noise"),
              "nwalkers": (int, "nwalkers")}
 _INDEX_COLUMNS = ["model", "dataset", "group", "seed", "status", "seconds", "converged", "path",
-                  "worker", "peak_rss_mb", "dataset_path", "dataset_sha256"]
+                  "worker", "peak_rss_mb", "threads", "dataset_path", "dataset_sha256"]
 
 
 @dataclass(frozen=True)
@@ -106,6 +126,7 @@ class Campaign:
     tasks: tuple
     scheduler: str | None
     workers: int | None
+    threads: int | None = None
 
 
 def _resolve(name, base):
@@ -154,13 +175,10 @@ def load_campaign(path):
     if seed < 0:
         raise InputError(where, f"expected an integer >= 0 (got {seed})", field="seed")
     out = base / require(doc, "out", str, where)
-    scheduler = require(doc, "scheduler", str, where, default=None)
-    if scheduler is not None and scheduler != "local" and "://" not in scheduler:
-        raise InputError(where, f"expected 'local' or an address like tcp://HOST:PORT (got {scheduler!r})",
-                         field="scheduler")
-    workers = require(doc, "workers", int, where, default=None)
-    if workers is not None and workers < 1:
-        raise InputError(where, f"expected an integer >= 1 (got {workers})", field="workers")
+    scheduler = check_scheduler(require(doc, "scheduler", str, where, default=None), where, "scheduler",
+                                need_dask=False)
+    workers = check_count(require(doc, "workers", int, where, default=None), where, "workers")
+    threads = check_count(require(doc, "threads", int, where, default=None), where, "threads")
     options = {}
     fit_doc = require(doc, "fit", dict, where, default={})
     for key, value in fit_doc.items():
@@ -248,15 +266,25 @@ def load_campaign(path):
                                          "dataset": dataset.sha256},
                               "sampler": sampler,
                               "path": str(inside(out, out / rel))})
-    return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers)
+    return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers,
+                    threads=threads)
 
 
 def _spec(task):
     return json.dumps({k: v for k, v in task.items() if k != "path"}, sort_keys=True)
 
 
-def run_fit(task):
-    """Run one campaign fit and write its result (top level and picklable: processes and Dask)."""
+def run_fit(task, threads=None):
+    """Run one campaign fit and write its result (top level and picklable: processes and Dask).
+
+    The fit, its save and its summary run with the BLAS/OpenMP libraries limited to
+    :func:`skinfit.workers.worker_threads` threads.  An exception that would not survive the
+    way back to the campaign's process is raised as a :class:`~skinfit.errors.WorkerError`
+    with its class name and message."""
+    return crossing(_run_fit, task, threads)
+
+
+def _run_fit(task, threads):
     t0 = time.perf_counter()
     dataset = load_dataset(task["dataset_ref"])
     if dataset.sha256 != task["sha256"]["dataset"]:
@@ -266,23 +294,32 @@ def run_fit(task):
     if task["by"]:
         labels, _ = group_labels(dataset, task["by"])
         dataset = dataset.subset(np.array(labels, dtype=object) == task["group"], task["group"])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)  # recorded in the index instead
-        result = fit(task["model_ref"], dataset, priors=task["priors"], rng=task["seed"], split=task["split"],
-                     **task["options"])
-    for key in ("model", "priors"):
-        if result.attrs[f"{key}_sha256"] != task["sha256"][key]:
-            raise InputError(task[f"{key}_ref" if key == "model" else key], f"the {key} file changed since "
-                             "the campaign was read: run the campaign again")
-    record_source(result, full, task["group"], task["by"])
-    path = Path(task["path"])
-    result.save(path)
-    _write_text(path.parent / "summary.csv", result.summary().to_csv())
+    with limited_threads(threads):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)  # recorded in the index instead
+            result = fit(task["model_ref"], dataset, priors=task["priors"], rng=task["seed"], split=task["split"],
+                         **task["options"])
+        for key in ("model", "priors"):
+            if result.attrs[f"{key}_sha256"] != task["sha256"][key]:
+                raise InputError(task[f"{key}_ref" if key == "model" else key], f"the {key} file changed since "
+                                 "the campaign was read: run the campaign again")
+        record_source(result, full, task["group"], task["by"])
+        path = Path(task["path"])
+        result.save(path)
+        _write_text(path.parent / "summary.csv", result.summary().to_csv())
+        threads_used = thread_count()  # as the fit ends: a library loaded during it is counted too
     record = {"status": "done", "seconds": round(time.perf_counter() - t0, 3), "converged": result.converged,
-              "worker": f"{socket.gethostname()}:{os.getpid()}",
-              "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
+              "worker": f"{socket.gethostname()}:{os.getpid()}", "peak_rss_mb": _peak_rss_mb(),
+              "threads": threads_used}
     _write_json(path.parent / "task.json", {"spec": json.loads(_spec(task)), **record})
     return record
+
+
+def _peak_rss_mb():
+    """This process's peak resident memory in MiB (Linux reports KiB), NaN where unknown."""
+    if resource is None:
+        return float("nan")
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
 
 
 def _completed(task):
@@ -318,7 +355,7 @@ def _completed(task):
     return record, None
 
 
-def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
+def run_campaign(campaign, *, scheduler=None, workers=None, threads=None, echo=print):
     """Run every fit of a campaign not yet complete; returns the index table.
 
     Parameters
@@ -328,14 +365,25 @@ def run_campaign(campaign, *, scheduler=None, workers=None, echo=print):
         Overrides the file's ``scheduler``; None (and none in the file) uses local processes.
     workers : int, optional
         Local worker processes (or LocalCluster workers); default the file's, else the CPU count.
+    threads : int, optional
+        BLAS/OpenMP threads of each fit; default the file's, else
+        :func:`skinfit.workers.worker_threads` (1 unless the environment sets OMP_NUM_THREADS or
+        the like).
+
+    Every argument is checked (InputError, or MissingDependency for a Dask scheduler without
+    the ``dask`` extra) before anything is written.
     """
+    scheduler = check_scheduler(scheduler)
+    workers = check_count(workers, "--workers")
+    threads = check_count(threads, "--threads")
     campaign = campaign if isinstance(campaign, Campaign) else load_campaign(campaign)
-    scheduler = scheduler or campaign.scheduler
+    scheduler = check_scheduler(scheduler or campaign.scheduler, campaign.path, "scheduler")
     workers = workers or campaign.workers or os.cpu_count() or 1
+    threads = threads or campaign.threads
     out = campaign.out
     out.mkdir(parents=True, exist_ok=True)
     with CheckpointLock(out / "campaign"):  # one campaign at a time per out (else "OUT is in use by pid N")
-        return _run_locked(campaign, scheduler, workers, echo)
+        return _run_locked(campaign, scheduler, workers, threads, echo)
 
 
 def check_campaign_out(campaign):
@@ -373,7 +421,7 @@ def check_campaign_out(campaign):
                               "campaign another out, or list them in it, or remove them (nothing was written)")
 
 
-def _run_locked(campaign, scheduler, workers, echo):
+def _run_locked(campaign, scheduler, workers, threads, echo):
     out = campaign.out
     check_campaign_out(campaign)
     stale = remove_stale_temps(out)
@@ -386,14 +434,15 @@ def _run_locked(campaign, scheduler, workers, echo):
     for i, task in enumerate(campaign.tasks):
         row = {"model": task["model"], "dataset": task["dataset"], "group": task["group"], "seed": task["seed"],
                "status": "pending", "seconds": np.nan, "converged": None,
-               "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan,
+               "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan, "threads": None,
                "dataset_path": task["dataset_ref"], "dataset_sha256": task["sha256"]["dataset"]}
         done, problem = _completed(task)
         if problem is not None:
             echo(f"  stale    {_key(task)}: the saved fit is not reused: {problem}")
             log.write(f"{_now()} stale {_key(task)}: {problem}\n")
         if done is not None:
-            row.update({k: done[k] for k in ("seconds", "converged", "worker", "peak_rss_mb")}, status="complete")
+            row.update({k: done.get(k) for k in ("seconds", "converged", "worker", "peak_rss_mb", "threads")},
+                       status="complete")
             log.write(f"{_now()} skip {_key(task)} (complete)\n")
         else:
             todo.append(i)
@@ -408,8 +457,8 @@ def _run_locked(campaign, scheduler, workers, echo):
             rows[i].update(record)
             log.write(f"{_now()} done {_key(task)} {record['seconds']:.2f} s converged={record['converged']}\n")
         else:
-            rows[i].update(status=f"failed: {type(error).__name__}: {error}")
-            log.write(f"{_now()} failed {_key(task)}: {type(error).__name__}: {error}\n")
+            rows[i].update(status=f"failed: {error_line(error)}")
+            log.write(f"{_now()} failed {_key(task)}: {error_line(error)}\n")
         _write_index(out, rows)
         echo(f"  {rows[i]['status']:8s} {_key(task)}" + (f"  {rows[i]['seconds']:.1f} s, converged="
                                                         f"{rows[i]['converged']}" if error is None else ""))
@@ -418,32 +467,17 @@ def _run_locked(campaign, scheduler, workers, echo):
         for i in todo:
             log.write(f"{_now()} run {_key(campaign.tasks[i])}\n")
         if todo and scheduler is None:
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=watch_parent,
-                                     initargs=(os.getpid(),)) as pool:
-                futures = {pool.submit(run_fit, campaign.tasks[i]): i for i in todo}
-                for fut in as_completed(futures):
-                    _collect(fut, futures[fut], finish)
+            run_isolated(partial(run_fit, threads=threads), {i: campaign.tasks[i] for i in todo}, workers, finish)
         elif todo:
-            _run_dask(campaign, todo, scheduler, workers, finish)
+            _run_dask(campaign, todo, scheduler, workers, threads, finish)
     finally:
         log.write(f"{_now()} end\n")
         log.close()
     return pd.DataFrame(rows, columns=_INDEX_COLUMNS)
 
 
-def _collect(future, i, finish):
-    try:
-        record = future.result()
-    except Exception as exc:  # a failed fit is recorded in the index; the campaign goes on
-        return finish(i, error=exc)
-    finish(i, record)
-
-
-def _run_dask(campaign, todo, scheduler, workers, finish):
-    from .errors import require_optional
-
-    distributed = require_optional("distributed", "dask")
+def _run_dask(campaign, todo, scheduler, workers, threads, finish):
+    distributed = require_optional("distributed", "dask")  # checked before the run (check_scheduler)
     Client, LocalCluster, dask_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
 
     cluster = None
@@ -453,13 +487,14 @@ def _run_dask(campaign, todo, scheduler, workers, finish):
     else:
         try:
             client = Client(scheduler, timeout=30)
-        except OSError as exc:
-            raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+        except Exception as exc:  # unreachable (OSError, TimeoutError), or a transport distributed lacks
+            raise InputError("--scheduler", f"cannot reach the Dask scheduler at {scheduler} "
+                                            f"({error_line(exc)})") from None
     try:
-        futures = {client.submit(run_fit, campaign.tasks[i], key=task_key(campaign.tasks[i]), pure=False): i
+        futures = {client.submit(run_fit, campaign.tasks[i], threads, key=task_key(campaign.tasks[i]), pure=False): i
                    for i in todo}
         for fut in dask_completed(list(futures)):
-            _collect(fut, futures[fut], finish)
+            collect(fut, futures[fut], finish)
     finally:
         client.close()
         if cluster is not None:
@@ -494,17 +529,19 @@ def _now():
 def cli_campaign(args):
     """``skinfit campaign``: run a campaign file and print its index."""
     t0 = time.perf_counter()
+    check_scheduler(args.scheduler)  # before the campaign's cards and data are read
     campaign = load_campaign(args.campaign)
     as_json = getattr(args, "json", False)
     echo = (lambda *a, **k: print(*a, **k, file=sys.stderr)) if as_json else print
-    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers, echo=echo)
+    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers,
+                         threads=getattr(args, "threads", None), echo=echo)
     failed = ~table["status"].isin(["done", "complete"])
     if as_json:
         print(json.dumps({"index": str(campaign.out / "index.csv"), "failed": int(failed.sum()),
                           "fits": json.loads(table.to_json(orient="records"))}, indent=2))
         return 1 if failed.any() else 0
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
-        print(table.drop(columns=["path", "worker", "dataset_path", "dataset_sha256"]).to_string(index=False))
+        print(table.drop(columns=["path", "worker", "threads", "dataset_path", "dataset_sha256"]).to_string(index=False))
     unconverged = sum(c is False for c in table["converged"])
     print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
           f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")

@@ -185,6 +185,10 @@ def _cmd_fit(args):
 
             print("\n".join(read_inputs(out)) + "\n")  # the files every group's fit read
             print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
+        failed = int((index["status"] != "done").sum())
+        if failed:  # as a campaign: the other groups' results kept, exit 1
+            print(f"skinfit: {failed} of {len(index)} group fit(s) failed, see above", file=sys.stderr)
+            return 1
         warned = int((~index["converged"].astype(bool) | (index["warnings"] > 0)).sum())
         if args.strict and warned:  # as for a single fit: results kept, exit 3
             print(f"skinfit: --strict: {warned} group problem(s) (not converged or warned), see above",
@@ -321,6 +325,8 @@ def build_parser():
     s.add_argument("campaign", help="campaign TOML file")
     s.add_argument("--scheduler", help="Dask scheduler: tcp://HOST:PORT, or 'local' for a LocalCluster")
     s.add_argument("--workers", type=_COUNT, default=None, help="local worker processes (default: cores)")
+    s.add_argument("--threads", type=_COUNT, default=None, help="BLAS/OpenMP threads per fit (default 1, "
+                   "unless OMP_NUM_THREADS or the like is set)")
     s.add_argument("--json", action="store_true", help="print the index as JSON (progress goes to stderr)")
     s.set_defaults(func=_lazy("skinfit.campaign", "cli_campaign"))
     s = sub.add_parser("population", help="population distribution over per-subject fits (a --by run or a campaign)")

@@ -107,8 +107,16 @@ def _select(ds, rows):
 def _run_one(item, path):
     """Fit one plan item, compute what the comparison reads (log Z by bridge sampling and
     PSIS-LOO, cached in the fit's attributes, each from its own fixed seed) and save it (top
-    level: runs in a worker process, so these costs are spread over the workers too)."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    level: runs in a worker process, so these costs are spread over the workers too), with
+    one BLAS/OpenMP thread unless the environment sets otherwise (one worker per core:
+    :func:`skinfit.workers.worker_threads`)."""
+    from .workers import limited_threads
+
+    with limited_threads():
+        return _fit_one(item, path)
+
+
+def _fit_one(item, path):
     from .data import load_dataset
     from .errors import InputError
     from .fit import fit
@@ -165,7 +173,9 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     from .fit import load_fit
     from .paths import explicit_search_path, set_search_path
     from .report import claim_report_folder, write_report
+    from .workers import check_count
 
+    check_count(jobs, "--jobs")  # a count >= 1 or None, before any work
     out = Path(out)
     claim_report_folder(Path(report))  # a folder of the user's files is refused now, not after the fits
     plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]

@@ -1,9 +1,39 @@
-"""The one error type for bad user input, and the warnings skinfit emits."""
+"""The one error type for bad user input, and the warnings skinfit emits.
 
-__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "MissingDependency", "require_optional"]
+Every exception class skinfit defines must cross a process boundary intact (a campaign's or the
+demo's worker raises it, the parent unpickles it): one whose ``__init__`` takes other arguments
+than it passes to ``Exception.__init__`` inherits :class:`Portable`, and
+:func:`portable` replaces, in a worker, an exception that would still not survive the crossing.
+"""
+
+import pickle
+
+__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "MissingDependency", "require_optional",
+           "Portable", "WorkerError", "portable", "error_line"]
 
 
-class InputError(ValueError):
+class Portable:
+    """Mixin of an exception class whose instances pickle whatever its ``__init__`` takes.
+
+    The default reduction calls ``cls(*self.args)``: an ``__init__`` with other or keyword-only
+    arguments (``MAPError(message, result)``) then fails in the process that unpickles it, where
+    a ``concurrent.futures`` pool takes the failure for a dead worker (``BrokenProcessPool`` for
+    every fit).  This one rebuilds the instance without calling ``__init__``: its ``args`` and
+    its attributes (``__dict__``) as they were.  List it before the builtin base class.
+    """
+
+    def __reduce__(self):
+        return _restore, (type(self), self.args, dict(self.__dict__))
+
+
+def _restore(cls, args, state):
+    exc = cls.__new__(cls, *args)
+    exc.args = args
+    exc.__dict__.update(state)
+    return exc
+
+
+class InputError(Portable, ValueError):
     """A user file or argument is invalid.
 
     The message names the file, the field or column, the row (1-based data row, header
@@ -23,15 +53,6 @@ class InputError(ValueError):
             loc += f", row {row}"
         super().__init__(f"{loc}: {what}")
 
-    def __reduce__(self):
-        # keyword-only field/row: the default reduction (cls, self.args) cannot rebuild it, so a
-        # campaign worker's error would not cross the process boundary (and its message be lost)
-        return (_rebuild, (type(self), self.where, self.what, self.field, self.row))
-
-
-def _rebuild(cls, where, what, field, row):
-    return cls(where, what, field=field, row=row)
-
 
 class ConvergenceWarning(UserWarning):
     """A fit did not meet its convergence criteria."""
@@ -41,7 +62,7 @@ class SupportWarning(UserWarning):
     """A prediction was requested at a parameter point outside the model's physical support."""
 
 
-class MissingDependency(ImportError):
+class MissingDependency(Portable, ImportError):
     """An optional dependency is not installed; the message names the extra that brings it."""
 
     def __init__(self, package, extra):
@@ -58,3 +79,29 @@ def require_optional(module, extra):
         return importlib.import_module(module)
     except ImportError:
         raise MissingDependency(module.split(".")[0], extra) from None
+
+
+class WorkerError(Portable, RuntimeError):
+    """An exception raised in a worker process that could not be sent back as itself (it, or
+    an attribute of it, does not pickle): its class name (``kind``) and message."""
+
+    def __init__(self, kind, message):
+        super().__init__(message)
+        self.kind = kind
+
+
+def portable(exc):
+    """``exc`` when it survives pickling and unpickling (as it must to leave a worker), else a
+    :class:`WorkerError` holding its class name and message."""
+    try:
+        pickle.loads(pickle.dumps(exc))
+    except Exception:  # whatever pickling raises (TypeError, AttributeError, PicklingError, ...)
+        return WorkerError(type(exc).__name__, str(exc))
+    return exc
+
+
+def error_line(exc):
+    """``"Class: message"`` on one line, for an index or a log (a :class:`WorkerError` named by
+    the class of the exception it stands for)."""
+    kind = exc.kind if isinstance(exc, WorkerError) else type(exc).__name__
+    return f"{kind}: " + " ".join(str(exc).split())

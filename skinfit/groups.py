@@ -2,7 +2,9 @@
 
 ``skinfit fit MODEL DATASET --by subject --out RUN`` writes, for every subject,
 ``RUN/<group>/fit.nc`` and ``summary.csv``, plus ``RUN/index.json`` listing every group with
-its label, rows, seed, convergence and path, and the dataset's card path and sha256.  The
+its label, rows, seed, convergence and path, and the dataset's card path and sha256.  A group
+whose fit fails (a MAP with no possible start, ...) fails alone: the others are fitted and
+saved, and the index lists it under ``failed`` with its one-line error.  The
 folder of a group is :func:`group_dir` of its label (distinct for distinct labels); each fit
 records its label and data hash, which :func:`load_groups` checks.  The run holds the lock a
 plain ``skinfit fit --out RUN`` takes, so two runs into one folder cannot interleave.
@@ -33,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from .data import Dataset, load_dataset
-from .errors import InputError
+from .errors import InputError, error_line
 from .fit import fit, load_fit, resolve_inputs
 from .provenance import input_lines, input_record
 
@@ -162,7 +164,10 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     Returns
     -------
     pandas.DataFrame
-        The index: one row per group (label, rows, seed, converged, seconds, path).
+        The index: one row per group (label, rows, seed, converged, seconds, path, status):
+        ``status`` is ``done``, or ``failed: Class: message`` for a group whose fit raised (its
+        other columns empty), which the others do not wait for.  When every group fails, the
+        first group's exception is raised (after the index lists them all).
     """
     from .checkpoint import CheckpointLock, remove_stale_temps
 
@@ -175,7 +180,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
     base = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
     out_dir = Path(out_dir)
     labels = np.array(labels, dtype=object)
-    rows = []
+    rows, failed, first = [], [], None
     header = {"model": model.id, "dataset": dataset.id, "by": by, "seed": base,
               "dataset_path": card_path(dataset), "dataset_sha256": dataset.sha256, "dataset_is_file": from_file,
               "model_sha256": model.sha256, "priors_sha256": priors.sha256,
@@ -190,8 +195,14 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
             sub = dataset.subset(labels == label, label)
             group_seed = derive_seed(base, label)
             t0 = time.perf_counter()
-            result = fit(model, sub, priors=priors, rng=group_seed, split=split, noise=noise,
-                         progress=progress, ess_target=ess_target, max_steps=max_steps, **fit_options)
+            try:
+                result = fit(model, sub, priors=priors, rng=group_seed, split=split, noise=noise,
+                             progress=progress, ess_target=ess_target, max_steps=max_steps, **fit_options)
+            except Exception as exc:  # this group's fit fails alone: listed with its error, the others go on
+                failed.append({"group": label, "rows": len(sub), "seed": group_seed, "error": error_line(exc)})
+                _write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
+                first = first or exc
+                continue
             record_source(result, dataset, label, by)
             rel = Path(group_dir(label)) / "fit.nc"
             result.save(inside(out_dir, out_dir / rel))
@@ -199,8 +210,14 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
             rows.append({"group": label, "rows": len(sub), "seed": group_seed, "converged": result.converged,
                          "warnings": len(result.warnings), "seconds": round(time.perf_counter() - t0, 3),
                          "path": rel.as_posix()})
-            _write_json(out_dir / "index.json", {**header, "groups": rows})
-    return pd.DataFrame(rows)
+            _write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
+    if not rows and first is not None:  # every group failed (a bad option fails them all): the first error
+        raise first
+    table = pd.DataFrame([{**r, "status": "done"} for r in rows] + [
+        {"group": f["group"], "rows": f["rows"], "seed": f["seed"], "converged": False, "warnings": 0,
+         "seconds": np.nan, "path": None, "status": f"failed: {f['error']}"} for f in failed],
+        columns=["group", "rows", "seed", "converged", "warnings", "seconds", "path", "status"])
+    return table
 
 
 def read_inputs(run):
@@ -245,11 +262,13 @@ def read_index(path):
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json of `skinfit fit --by` or of a campaign)")
     kind, doc = index_document(index)
+    failed = 0
     if kind == "campaign":
         listed = [r for r in doc if not isinstance(r, dict) or r.get("status", "done") in ("done", "complete")]
     elif isinstance(doc.get("groups"), list):
         listed = [dict(g, model=doc.get("model"), dataset=doc.get("dataset")) if isinstance(g, dict) else g
                   for g in doc["groups"]]
+        failed = len(doc.get("failed") or [])
     else:
         raise InputError(index, _INDEX_KINDS)
     rows = []
@@ -261,7 +280,7 @@ def read_index(path):
             raise InputError(index, f"lists {r['path']}, which does not exist", row=i)
         rows.append({"model": r.get("model"), "dataset": r.get("dataset"), "group": r.get("group"),
                      "path": fit_path})
-    return rows, (len(doc) - len(listed) if isinstance(doc, list) else 0)
+    return rows, (len(doc) - len(listed) if isinstance(doc, list) else failed)
 
 
 def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
@@ -269,7 +288,8 @@ def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
 
     Each fit must hold the group it is listed under and the data the index records (its
     ``group`` and ``source`` attrs): a mixed-up or stale folder is an InputError, not a wrong
-    answer.  Data edited since the fits were made gives a warning.
+    answer.  Data edited since the fits were made gives a warning, as do groups whose fit
+    failed (listed under ``failed``: they are not among the fits returned).
     """
     path = Path(path)
     index = path / "index.json" if path.is_dir() else path
@@ -295,6 +315,10 @@ def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
         if problem:
             raise InputError(fit_path, f"listed for group {label!r} in {index} but {problem}")
         fits[label] = result
+    failed = [f.get("group") for f in doc.get("failed") or [] if isinstance(f, dict)]
+    if failed:
+        warnings.warn(f"{index}: the fits of {len(failed)} group(s) failed and are left out "
+                      f"({', '.join(map(str, failed))}): see their errors there", UserWarning, stacklevel=2)
     card = doc.get("dataset_path")
     if card and doc.get("dataset_is_file") and Path(card).exists():
         try:

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import nlopt
 import numpy as np
 
+from .errors import Portable
+
 __all__ = ["MAPResult", "MAPError", "find_map", "laplace_covariance"]
 
 NLOPT_CODES = {1: "SUCCESS", 2: "STOPVAL_REACHED", 3: "FTOL_REACHED", 4: "XTOL_REACHED",
@@ -33,7 +35,7 @@ class MAPResult:
         return {n: float(v) for n, v in zip(names, self.theta)}
 
 
-class MAPError(RuntimeError):
+class MAPError(Portable, RuntimeError):
     """Every optimisation start failed; ``.result`` holds what was tried."""
 
     def __init__(self, message, result):

@@ -421,16 +421,18 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
     whose fits' content (:meth:`~skinfit.fit.Fit.content_hash`), function, arguments and plotting code are those
     recorded in ``figdir/.figures.json`` beside an existing PNG and PDF is kept. The rest are
     drawn in up to :data:`MAX_FIGURE_WORKERS` forked processes (in this one where fork is
-    unavailable; at most ``workers``), costliest first, unless :mod:`skinfit.figure_store`
-    holds them from an earlier drawing of the same content. ``meanwhile``, when given, is
-    called once while the workers draw and returns more jobs (drawn from what it computed, in
-    this process, after it returns). figures/ is left holding only these jobs' figures.
+    unavailable or other threads run here, :func:`skinfit.workers.forkable`; at most
+    ``workers``), costliest first, unless :mod:`skinfit.figure_store` holds them from an
+    earlier drawing of the same content. ``meanwhile``, when given, is called once while the
+    workers draw and returns more jobs (drawn from what it computed, in this process, after it
+    returns). figures/ is left holding only these jobs' figures.
     Returns one error text or None per job, ``jobs`` then meanwhile's."""
     import multiprocessing
     import os
     from concurrent.futures import ProcessPoolExecutor
 
     from . import figure_store
+    from .workers import forkable
 
     global _FITS, _JOBS, _STORED
     manifest = _manifest(figdir)
@@ -458,7 +460,7 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
     jobs = every
     errors = {}
     workers = min(workers or MAX_FIGURE_WORKERS, os.cpu_count() or 1)
-    fork = "fork" in multiprocessing.get_all_start_methods()
+    fork = forkable()  # never from a process with other threads (a notebook's): its child may deadlock
     if meanwhile is not None and (not fork or min(workers, len(todo)) < 2):  # no workers drawing meanwhile:
         todo = by_cost(todo + plan(meanwhile()))  # its jobs drawn with the rest
         meanwhile = None

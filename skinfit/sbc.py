@@ -22,6 +22,8 @@ parameters and two tests each, the chance that a calibrated pipeline fails somew
 
 import json
 import math
+import multiprocessing
+import threading
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +38,7 @@ from .models import Model, load_model
 from .outputs import check_outputs
 from .posterior import Posterior
 from .priors import PriorSet, load_priors
+from .workers import check_count, forkable
 
 __all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "cli_sbc"]
 
@@ -144,6 +147,7 @@ def run_sbc(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_
     -------
     SBCResult
     """
+    check_count(jobs, "jobs")  # a count >= 1 or None, before any work
     model = model if isinstance(model, Model) else load_model(model)
     priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
     fit_priors = priors if fit_priors is None else (
@@ -222,11 +226,20 @@ def _run_one(item):
 
 
 def _map(job, items, jobs):
-    """``job`` over ``items`` in order, in ``jobs`` processes (forked: no re-import per task)."""
+    """``job`` over ``items`` in order, in ``jobs`` processes (forked: no re-import per task),
+    never forked from a process with other threads (:func:`skinfit.workers.forkable`): there
+    one at a time in this process, with a warning."""
     if jobs is None or jobs <= 1 or len(items) <= 1:
         yield from map(job, items)
         return
-    import multiprocessing
+    if not forkable():
+        why = (f"this process runs {threading.active_count() - 1} other thread(s) (a notebook kernel, a Dask client, "
+               "...) and forking it could deadlock the workers" if "fork" in multiprocessing.get_all_start_methods()
+               else "this platform cannot fork workers")
+        warnings.warn(f"SBC: {why}: the {len(items)} simulations run here one at a time (run `skinfit sbc --jobs N` "
+                      "from a shell for parallel ones)", UserWarning, stacklevel=3)
+        yield from map(job, items)
+        return
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = multiprocessing.get_context("fork")

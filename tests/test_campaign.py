@@ -166,7 +166,7 @@ def test_kill_midway_then_restart_runs_only_unfinished(tmp_path):
     ('seed = 1\nout = "o"\nmodels = ["electroadhesion_coulomb"]\ndatasets = ["electroadhesion_synthetic"]\n[split]\nelectroadhesion_coulomb = {alpha = "voltage"}',
      r"split.electroadhesion_coulomb.alpha: model 'electroadhesion_coulomb' has no parameter 'alpha'"),
     ('seed = 1\nout = "o"\nmodels = ["electroadhesion_coulomb"]\ndatasets = ["electroadhesion_synthetic"]\nscheduler = "localhost"',
-     r"scheduler: expected 'local' or an address"),
+     r"scheduler: expected 'local' or a Dask scheduler's address like tcp://HOST:PORT"),
 ])
 def test_validation_names_file_and_field(tmp_path, text, match):
     path = tmp_path / "bad.toml"
@@ -414,3 +414,99 @@ def test_class4_write_side_check_refuses_ids_the_card_reader_would_pass_on():
     for bad in ("../../x", "/tmp/abs", "a/b", "..", ".hidden", "a b", ""):
         with pytest.raises(skinfit.InputError, match="cannot name a result folder"):
             check_name(bad, "dataset id", "c.toml")
+
+
+def _map_failure_campaign(tmp_path):
+    """The electroadhesion model on two 20-row datasets: the shipped data's first rows ("good")
+    and the same with a zero normal force in row 1 ("zero": every prior draw impossible there,
+    so its MAP fails with MAPError(message, result))."""
+    from worker_jobs import zero_force
+
+    zero_force(tmp_path, rows=20)
+    good = tmp_path / "good"
+    good.mkdir()
+    src = Path(skinfit.__file__).resolve().parents[1] / "datasets" / "electroadhesion_synthetic"
+    (good / "dataset.toml").write_text((src / "dataset.toml").read_text().replace(
+        'id = "electroadhesion_synthetic"', 'id = "good"'))
+    (good / "data.csv").write_text("\n".join((src / "data.csv").read_text().splitlines()[:21]) + "\n")
+    path = tmp_path / "c.toml"
+    path.write_text('schema_version = 1\nseed = 3\nout = "out"\nmodels = ["electroadhesion"]\n'
+                    'datasets = ["zero", "good"]\n[fit]\ness = 40\nmax_steps = 600\n')
+    return path
+
+
+def test_failing_fit_never_touches_another_map_error_on_the_default_executor(tmp_path, capsys):
+    """Issue 39 point 8: one dataset's MAP fails (MAPError, whose __init__ takes a result) on
+    the default executor (spawned processes). The other fit is saved and indexed, the failing
+    one is reported with its own one-line error (not BrokenProcessPool), the run exits 1; a
+    rerun keeps the saved fit and reports the same error again. Each fit ran with one BLAS
+    thread."""
+    path = _map_failure_campaign(tmp_path)
+    assert main(["campaign", str(path), "--workers", "2"]) == 1
+    printed = capsys.readouterr().out
+    out = tmp_path / "out"
+    table = pd.read_csv(out / "index.csv").set_index("dataset")
+    assert table.loc["good", "status"] == "done" and (out / table.loc["good", "path"]).is_file()
+    assert table.loc["good", "threads"] == 1  # the worker's BLAS/OpenMP thread limit as the fit ended
+    error = table.loc["zero", "status"]
+    assert error.startswith("failed: MAPError: ") and "MAP failed" in error and "data row(s) 1 (normal_force = 0" in error
+    assert "BrokenProcessPool" not in printed and "MAP failed" in printed
+    assert f"failed {('electroadhesion / zero')}: MAPError: " in (out / "campaign.log").read_text()
+    mtime = (out / table.loc["good", "path"]).stat().st_mtime_ns
+    assert main(["campaign", str(path), "--workers", "2"]) == 1  # the rerun completes
+    again = pd.read_csv(out / "index.csv").set_index("dataset")
+    assert again.loc["good", "status"] == "complete" and again.loc["zero", "status"] == error
+    assert (out / table.loc["good", "path"]).stat().st_mtime_ns == mtime
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--scheduler", "banana"], "--scheduler: expected 'local' or a Dask scheduler's address like tcp://HOST:PORT"),
+    (["--scheduler", "tcp://localhost"], "--scheduler: expected 'local' or a Dask scheduler's address"),
+])
+def test_scheduler_argument_is_refused_in_one_line_before_any_work(tmp_path, capsys, argv, message):
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "sched")
+    capsys.readouterr()
+    assert main(["campaign", str(path), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"skinfit: error: {message}") and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "sched").exists()
+
+
+def test_scheduler_without_dask_installed_is_refused_in_one_line(tmp_path, capsys, monkeypatch):
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "nodask")
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as without the dask extra
+    capsys.readouterr()
+    assert main(["campaign", str(path), "--scheduler", "local"]) == 2
+    err = capsys.readouterr().err
+    assert err == "skinfit: error: distributed is not installed: install skinfit[dask] (pip install 'skinfit[dask]')\n"
+    assert not (tmp_path / "nodask").exists()
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"scheduler": "banana"}, r"^--scheduler: expected 'local'"),
+    ({"workers": 0}, r"^--workers: expected an integer >= 1 \(got 0\)"),
+    ({"workers": -1}, r"^--workers: expected an integer >= 1 \(got -1\)"),
+    ({"workers": "2"}, r"^--workers: expected an integer >= 1 \(got '2'\)"),
+    ({"threads": 0}, r"^--threads: expected an integer >= 1 \(got 0\)"),
+])
+def test_run_campaign_arguments_are_checked_before_any_work(tmp_path, kwargs, match):
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "args")
+    with pytest.raises(skinfit.InputError, match=match):
+        run_campaign(path, echo=lambda *a: None, **kwargs)
+    assert not (tmp_path / "args").exists()
+
+
+@pytest.mark.parametrize("line, match", [
+    ('scheduler = "banana://host:1"', r"scheduler: expected 'local' or a Dask scheduler's address"),
+    ("threads = 0", r"threads: expected an integer >= 1 \(got 0\)"),
+    ("workers = true", r"workers: expected an integer"),
+])
+def test_campaign_file_scheduler_and_counts_are_checked(tmp_path, line, match):
+    data, _ = write_population(tmp_path, n_subjects=1)
+    path = _campaign(tmp_path, data.name, "file", extra=line)
+    with pytest.raises(skinfit.InputError, match=match) as info:
+        load_campaign(path)
+    assert str(path) in str(info.value)

@@ -254,6 +254,35 @@ def test_damaged_campaign_file_gives_input_error(doc):
         _load_ok_or_input_error(lambda: load_campaign(_write(tmp, "c.toml", dumps(doc))))
 
 
+# ---- issue 39 point 14: the executor a campaign is given -----------------------------------
+# Strategy size: 300 examples of text of 0-40 characters, half built from the pieces of an
+# address (schemes Dask has and has not, hosts, ports in and out of range, paths, credentials),
+# half any Unicode but surrogates and NUL; and any JSON-like scalar (int, float, bool, None).
+ADDRESS_BITS = st.sampled_from(["tcp", "tls", "ucx", "ws", "wss", "inproc", "http", "banana", "local", "://", ":",
+                                "//", "/", "@", "?", "#", "[", "]", "::1", "host", "127.0.0.1", "8786", "0",
+                                "65536", "-1", "x", " ", "%"])
+scheduler_values = st.one_of(st.lists(ADDRESS_BITS, max_size=8).map("".join),
+                             st.text(st.characters(blacklist_categories=["Cs"], blacklist_characters="\0"),
+                                     max_size=40),
+                             st.integers(), st.floats(), st.booleans(), st.none())
+
+
+@settings(max_examples=300, deadline=None)
+@given(value=scheduler_values)
+def test_any_scheduler_value_is_taken_or_refused_in_one_line(value):
+    """--scheduler / a campaign file's scheduler: None, 'local' or SCHEME://HOST:PORT is taken;
+    anything else is an InputError of one line naming --scheduler, never another exception."""
+    from skinfit.workers import SCHEMES, check_scheduler
+
+    try:
+        taken = check_scheduler(value)
+    except InputError as exc:
+        assert str(exc).startswith("--scheduler: expected 'local' or a Dask scheduler's address") and "\n" not in str(exc)
+        return
+    assert taken == value
+    assert value is None or value == "local" or value.split("://")[0] in SCHEMES
+
+
 # ---- issue 21: group labels and ids with path syntax (classes 2 and 4) ----------------------
 # Strategy size: a label or id is 0-24 characters, each drawn half from path syntax ("/", "\\",
 # ".", "..", "~", " ", "=", ",", "_", "-", "A", "a") and half from any Unicode character but

@@ -308,3 +308,60 @@ def test_load_groups_refuses_an_index_that_is_not_a_run_by_groups(tmp_path, text
     with pytest.raises(skinfit.InputError, match=why) as refused:
         load_groups(tmp_path)
     assert str(refused.value).startswith(str(tmp_path / "index.json"))
+
+
+def _two_subjects_one_impossible(folder):
+    """The shipped electroadhesion data's first 40 rows as subjects S01 (20 rows) and S02 (20
+    rows, its first with a zero normal force: every prior draw of the electroadhesion model is
+    impossible there, so S02's MAP fails with MAPError)."""
+    from pathlib import Path
+
+    src = Path(skinfit.__file__).resolve().parents[1] / "datasets" / "electroadhesion_synthetic"
+    out = folder / "two"
+    out.mkdir()
+    (out / "dataset.toml").write_text((src / "dataset.toml").read_text().replace(
+        'id = "electroadhesion_synthetic"', 'id = "two"'))
+    lines = (src / "data.csv").read_text().splitlines()[:41]
+    for i in range(21, 41):
+        lines[i] = "S02" + lines[i][3:]
+    cells = lines[21].split(",")
+    cells[2] = "0"
+    lines[21] = ",".join(cells)
+    (out / "data.csv").write_text("\n".join(lines) + "\n")
+    return out
+
+
+def test_failing_fit_never_touches_another_group_of_a_by_run(tmp_path, capsys):
+    """Issue 39 point 8 for `skinfit fit --by`: S01 fits, S02's MAP fails. S01 is saved and
+    listed; S02 is listed under 'failed' with its one-line error; the run exits 1; load_groups
+    returns S01 and warns that S02 is left out; read_index counts it as not complete."""
+    from skinfit.groups import read_index
+
+    data = _two_subjects_one_impossible(tmp_path)
+    run = tmp_path / "run"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
+        code = main(["fit", "electroadhesion", str(data), "--by", "subject", "--out", str(run), "--seed", "3",
+                     "--ess", "40", "--max-steps", "600", "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 1 and "1 of 2 group fit(s) failed" in captured.err
+    index = json.loads((run / "index.json").read_text())
+    assert [g["group"] for g in index["groups"]] == ["subject=S01"] and (run / index["groups"][0]["path"]).is_file()
+    [failed] = index["failed"]
+    assert failed["group"] == "subject=S02" and failed["error"].startswith("MAPError: ")
+    assert "data row(s) 1 (normal_force = 0" in failed["error"] and "\n" not in failed["error"]
+    assert "failed: MAPError: " in captured.out
+    with pytest.warns(UserWarning, match=r"the fits of 1 group\(s\) failed and are left out \(subject=S02\)"):
+        assert list(load_groups(run)) == ["subject=S01"]
+    rows, skipped = read_index(run)
+    assert [r["group"] for r in rows] == ["subject=S01"] and skipped == 1
+
+
+def test_by_run_whose_every_group_fails_raises_the_first_error(tmp_path):
+    """A bad option fails every group alike: the error itself (one line from the CLI), not a
+    table of failures."""
+    data, _ = write_population(tmp_path, n_subjects=2)
+    with pytest.raises(skinfit.InputError) as info:
+        fit_by("electroadhesion_coulomb", str(data), "subject", tmp_path / "run", seed=1, split={"mu": "nope"})
+    assert "nope" in str(info.value)
+    assert len(json.loads((tmp_path / "run" / "index.json").read_text())["failed"]) == 2

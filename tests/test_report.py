@@ -437,35 +437,48 @@ def test_figure_workers_end_when_the_report_process_is_killed(ea_fit, tmp_path):
     assert not survivors, f"figure workers {survivors} outlived their report process"
 
 
+_FROZEN = """
+import concurrent.futures, gc, json, os, sys
+from skinfit import report
+from skinfit.fit import load_fit
+
+os.cpu_count = lambda: 2  # forked figure workers even on one core
+frozen = []  # objects frozen when the workers are started
+
+class Recording(concurrent.futures.ProcessPoolExecutor):
+    def __init__(self, *args, **kwargs):
+        frozen.append(gc.get_freeze_count())
+        super().__init__(*args, **kwargs)
+
+concurrent.futures.ProcessPoolExecutor = Recording
+fit = load_fit(sys.argv[1])
+before = gc.get_freeze_count()
+report.write_report(fit, sys.argv[2] + "/a")
+after = gc.get_freeze_count()
+gc.freeze()
+mine = gc.get_freeze_count()
+report.write_report(fit, sys.argv[2] + "/b")
+print(json.dumps([frozen, before, after, mine, gc.get_freeze_count()]))
+"""
+
+
 @pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(), reason="needs fork")
-def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path, monkeypatch):
+def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path):
     """The report freezes this process's objects while its forked workers draw, and unfreezes
     them after, so nothing it held stays out of the collector's reach (a leak in a long
-    session); objects the caller had frozen itself stay frozen."""
-    import concurrent.futures
-    import gc
+    session); objects the caller had frozen itself stay frozen. In a new interpreter: one
+    without other threads, from which the report forks its workers (skinfit.workers.forkable)."""
+    import subprocess
 
-    monkeypatch.setattr(os, "cpu_count", lambda: 2)  # forked figure workers even on one core
-    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")
-    frozen = []  # objects frozen when the workers are started
-
-    class Recording(concurrent.futures.ProcessPoolExecutor):
-        def __init__(self, *args, **kwargs):
-            frozen.append(gc.get_freeze_count())
-            super().__init__(*args, **kwargs)
-
-    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", Recording)
-    assert gc.get_freeze_count() == 0
-    report.write_report(ea_fit, tmp_path / "a")
-    assert len(frozen) == 1 and frozen[0] > 10_000  # the workers were forked from a frozen heap
-    assert gc.get_freeze_count() == 0
-    gc.freeze()
-    try:
-        mine = gc.get_freeze_count()
-        report.write_report(ea_fit, tmp_path / "b")
-        assert gc.get_freeze_count() > 0.9 * mine > 0  # not unfrozen (a frozen object freed leaves the count)
-    finally:
-        gc.unfreeze()
+    path = ea_fit.save(tmp_path / "fit.nc")
+    env = {**os.environ, "MPLBACKEND": "Agg", "SKINFIT_FIGURE_STORE": "off"}
+    out = subprocess.run([sys.executable, "-c", _FROZEN, str(path), str(tmp_path)], capture_output=True, text=True,
+                         env=env, timeout=600)
+    assert out.returncode == 0, out.stderr
+    frozen, before, after, mine, last = json.loads(out.stdout.strip().splitlines()[-1])
+    assert before == 0 and len(frozen) == 2 and frozen[0] > 10_000  # the workers were forked from a frozen heap
+    assert after == 0
+    assert last > 0.9 * mine > 0  # not unfrozen (a frozen object freed leaves the count)
 
 
 def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
@@ -626,3 +639,28 @@ def test_a_report_of_a_run_reports_the_fits_its_index_lists(ea_fit, tmp_path, no
     (run / "index.json").write_text(json.dumps({"groups": [{"group": "g=a", "path": "gone/fit.nc"}]}))
     assert main(["report", str(run), "--out", str(tmp_path / "r")]) == 2
     assert "lists gone/fit.nc, which does not exist" in capsys.readouterr().err
+
+
+def test_fork_from_a_threaded_process_never_happens_figures_drawn_here(ea_fit, tmp_path, monkeypatch):
+    """A report written from a process that runs other threads (a notebook kernel, a Dask
+    client): forking it could deadlock a figure worker on a lock another thread held, and Python
+    warns ("This process ... is multi-threaded, use of fork() may lead to deadlocks"). The
+    figures are drawn in this process instead: no such warning, every figure drawn. (The
+    warning is recorded, not raised: CPython clears an error raised by it, so -W error hides it.)"""
+    import threading
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)  # two figure workers, were fork allowed
+    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")  # every figure drawn
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, daemon=True)
+    other.start()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            index = report.write_report(ea_fit, tmp_path / "r")
+    finally:
+        stop.set()
+        other.join()
+    assert not [w for w in caught if "use of fork()" in str(w.message)], [str(w.message) for w in caught]
+    assert "could not be drawn" not in index.read_text()
+    assert len(list((tmp_path / "r" / "figures").glob("*.png"))) == 4  # the fit's four figures

@@ -87,3 +87,26 @@ def test_wrong_prior_is_flagged(tmp_path):
     result = run_sbc(MODEL, fit_priors=path, n_sims=10, jobs=2, **SMALL)
     assert not result.table.loc["mu", "pass"] and not result.passed
     assert result.ranks["mu"].mean() < 5  # posterior above the truth: few draws below it
+
+
+def test_fork_from_a_threaded_process_never_happens_simulations_run_here():
+    """run_sbc(jobs=2) from a process that runs other threads (a notebook kernel): forking it
+    could deadlock a worker, and Python warns. The simulations run in this process instead,
+    with a warning saying so, and give the ranks of the same seed run one at a time."""
+    import threading
+    import warnings
+
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, daemon=True)
+    other.start()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            threaded = run_sbc(MODEL, n_sims=2, jobs=2, **SMALL)
+    finally:
+        stop.set()
+        other.join()
+    messages = [str(w.message) for w in caught]
+    assert not [m for m in messages if "use of fork()" in m], messages
+    assert any("the 2 simulations run here one at a time" in m for m in messages), messages
+    np.testing.assert_array_equal(threaded.ranks.to_numpy(), run_sbc(MODEL, n_sims=2, jobs=1, **SMALL).ranks.to_numpy())
