@@ -1,6 +1,7 @@
 """The one error type for bad user input, and the warnings skinfit emits."""
 
-__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "MissingDependency", "require_optional"]
+__all__ = ["InputError", "InputTypeError", "ForwardError", "ConvergenceWarning", "SupportWarning", "MissingDependency",
+           "require_optional"]
 
 
 class InputError(ValueError):
@@ -27,6 +28,19 @@ class InputError(ValueError):
         # keyword-only field/row: the default reduction (cls, self.args) cannot rebuild it, so a
         # campaign worker's error would not cross the process boundary (and its message be lost)
         return (_rebuild, (type(self), self.where, self.what, self.field, self.row))
+
+
+class InputTypeError(InputError, TypeError):
+    """An argument of the wrong type (a dict or an array where a path or a Fit is expected, a
+    bool or a float where a count is): an InputError (one line, naming the argument) that is
+    also the TypeError Python's convention expects."""
+
+
+class ForwardError(InputError):
+    """A model's forward function broke its contract (skinfit.registry.ROLES): it raised,
+    returned something other than ``(dict of (k, n) real arrays, bool (k, n) ok)``, returned
+    NaN or inf at a point it marks valid, or is not vectorised over parameter draws.  ``where``
+    is the model card, ``field`` its ``forward`` key."""
 
 
 def _rebuild(cls, where, what, field, row):
