@@ -99,8 +99,8 @@ def check_path(value, where, name, what):
 
 
 def _kind(mode):
-    return ("a directory" if stat.S_ISDIR(mode) else "a FIFO" if stat.S_ISFIFO(mode)
-            else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "not a plain file")
+    return ("a directory" if stat.S_ISDIR(mode) else "a file" if stat.S_ISREG(mode) else "a FIFO" if stat.S_ISFIFO(mode)
+            else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket or other special file")
 
 
 def _kind_of(path):
@@ -148,14 +148,15 @@ def check_output_file(path, where, name, what):
     return path
 
 
-def check_output_folder(path, where, name):
+def check_output_folder(path, where, name, purpose="expected a folder"):
     """``path`` as a Path if it is a folder or can become one (its nearest existing ancestor is
-    a folder); an empty name (which would be the current folder) is refused."""
+    a folder); an empty name (which would be the current folder) is refused.  The error reads
+    ``PATH: is a file: PURPOSE`` (or ``is inside FILE, which is a file: PURPOSE``)."""
     path = Path(check_path(path, where, name, "the path of a folder"))
     top = _existing_ancestor(path)
     if not top.is_dir():
         what = "is" if top == Path(os.path.abspath(path)) else f"is inside {top}, which is"
-        raise InputError(where, f"{path} {what} {_kind_of(top)}, not a folder", field=name)
+        raise InputError(path, f"{what} {_kind_of(top)}: {purpose}")
     return path
 
 

@@ -278,7 +278,7 @@ def _lazy(module, function):
 
 def build_parser():
     p = _Parser(prog="skinfit", description="Bayesian inference for published "
-                                "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
+                "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
     p.add_argument("--version", action="version", version=f"skinfit {_version()}")
     p.add_argument("--path", action="append", metavar="DIR", default=[],
                    help="folder with models/, priors/, datasets/ searched first (repeatable); then "
@@ -446,7 +446,10 @@ def _run(args):
     try:
         for option in ("out", "report"):  # every such option names a folder: refused now, not after the work
             if getattr(args, option, None) is not None:
-                check_output_folder(getattr(args, option), f"--{option}", None)
+                noun = "report" if "report" in (option, args.command) else "results"
+                check_output_folder(getattr(args, option), f"--{option}", None,
+                                    f"--{option} names the folder the {noun} {'is' if noun == 'report' else 'are'} "
+                                    "written into")
         code = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler below
     except InputError as exc:

@@ -49,7 +49,7 @@ def _call(model, params, x, constants, when):
 
 def validated(model, out, k, n, observables, when="called on a batch of parameter draws"):
     """``(y, ok)`` as returned by the forward function, checked against the contract: (dict
-    observable -> float (k, n) array, bool (k, n) array); ForwardError naming what differs."""
+    observable -> new float (k, n) array, bool (k, n) array); ForwardError naming what differs."""
     if not (isinstance(out, tuple) and len(out) == 2):
         raise forward_error(model, f"returned {shown(out)}; expected a tuple (y, ok) ({when})")
     y, ok = out

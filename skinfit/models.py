@@ -174,8 +174,7 @@ class Model:
                 i, j = np.argwhere(valid & ~np.isfinite(arr))[0]
                 raise forward_error(self, f"returned {arr[i, j]} for {name!r} at row {j + 1} of draw {i + 1}, a point "
                                           "it marks valid (ok True): return ok False where the model is undefined")
-            arr = arr.copy()
-            arr[~valid] = np.nan
+            arr[~valid] = np.nan  # (a new array: validated() copies)
             out[name] = arr[0] if scalar else arr
         valid = valid[0] if scalar else valid
         if not return_valid and not np.all(valid):

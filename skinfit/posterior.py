@@ -598,19 +598,22 @@ class Posterior:
 
     def _nan_error(self, theta):
         """ForwardError for a NaN log-likelihood at parameter vector ``theta`` (d,) met while
-        fitting (MAP search or sampling): the data row and the prediction there (NaN at a point the forward function
-        marks valid, which must be ok False instead)."""
+        fitting (MAP search or sampling), naming the data row and the prediction there: NaN
+        where the forward function marks the model valid (it must say ok False there)."""
         with np.errstate(all="ignore"):
             ll, pred, _ = self._evaluate_block(theta[None], True)
         point = ", ".join(f"{name}={v:.6g}" for name, v in zip(self.names, theta))
         for o in self.observables:
             rows = np.flatnonzero(np.isnan(ll[o][0]))
             if len(rows):
-                r = rows[0]
-                return forward_error(self.model, f"returned {pred[o][0, r]} for {o!r} at data row {r + 1} with "
-                                                 f"parameters {{{point}}}, a point it marks valid (ok True), while "
-                                                 "fitting: return ok False where the model is undefined, or fix "
-                                                 "the function")
+                r, value = rows[0], pred[o][0, rows[0]]
+                if np.isnan(value):
+                    return forward_error(self.model, f"returned nan for {o!r} at data row {r + 1} with parameters "
+                                                     f"{{{point}}}, a point it marks valid (ok True), while fitting: "
+                                                     "return ok False where the model is undefined, or fix the "
+                                                     "function")
+                return forward_error(self.model, f"NaN log-likelihood for {o!r} at data row {r + 1} (prediction "
+                                                 f"{value:g}) with parameters {{{point}}}, while fitting")
         return forward_error(self.model, f"NaN log-likelihood at parameters {{{point}}} while fitting")
 
     def __call__(self, z):

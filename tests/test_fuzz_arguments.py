@@ -306,7 +306,7 @@ def test_class_unwritable_places_fit_save_refuses_before_writing(small_fit, tmp_
     device = _device(tmp_path)
     cases = [(tmp_path, r"is a directory: give the path of the fit file to write, e\.g\. .*/fit\.nc"),
              (fifo, r"is a FIFO: give the path of the fit file to write"),
-             (tmp_path / "file" / "fit.nc", r"cannot write the fit here: .*/file is not a plain file, not a folder"),
+             (tmp_path / "file" / "fit.nc", r"cannot write the fit here: .*/file is a file, not a folder"),
              ("", r"Fit\.save: path: expected the path of the fit file \(got ''\)"),
              (3, r"Fit\.save: path: expected the path of the fit file \(got 3\)")]
     if device is not None:

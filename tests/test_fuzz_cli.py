@@ -236,10 +236,10 @@ def test_class_cli_every_option_hostile_value_one_line_error_or_valid(stand_ins,
 
 
 @pytest.mark.parametrize("argv, match", [
-    (["fit", MODEL, DATASET, "--out", "@fifo"], r"--out: .*/fifo is a FIFO, not a folder"),
-    (["sbc", MODEL, "--n-sims", "2", "--out", "/dev/null"], r"--out: /dev/null is a device, not a folder"),
-    (["report", "@fit", "--out", "@file.txt/sub"], r"--out: .*/file\.txt/sub is inside .*/file\.txt, which is not a "
-                                                    r"plain file, not a folder"),
+    (["fit", MODEL, DATASET, "--out", "@fifo"], r"/fifo: is a FIFO: --out names the folder the results are written"),
+    (["sbc", MODEL, "--n-sims", "2", "--out", "/dev/null"], r"/dev/null: is a device: --out names the folder"),
+    (["report", "@fit", "--out", "@file.txt/sub"], r"/file\.txt/sub: is inside .*/file\.txt, which is a file: --out "
+                                                    r"names the folder the report is written into"),
     (["fit", MODEL, DATASET, "--out", ""], r"argument --out: expected a value \(got ''\)"),
     (["design", MODEL, "--candidates", "@grid.toml", "--from", ""], r"argument --from: expected a value \(got ''\)"),
     (["priors", "x\x1ey\u2028"], r"^skinfit: error: x\\x1ey\\u2028: no such prior"),
