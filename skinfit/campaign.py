@@ -104,7 +104,8 @@ from .groups import (_write_json, check_name, derive_seed, group_dir, group_labe
 from .models import NOISE_MODELS, load_model
 from .priors import load_priors
 from .sampling import sampler_settings
-from .workers import check_count, check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
+from .arguments import check_count
+from .workers import check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
 
 __all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit", "cli_campaign"]
 
@@ -177,8 +178,8 @@ def load_campaign(path):
     out = base / require(doc, "out", str, where)
     scheduler = check_scheduler(require(doc, "scheduler", str, where, default=None), where, "scheduler",
                                 need_dask=False)
-    workers = check_count(require(doc, "workers", int, where, default=None), where, "workers")
-    threads = check_count(require(doc, "threads", int, where, default=None), where, "threads")
+    workers = check_count(require(doc, "workers", int, where, default=None), where, "workers", optional=True)
+    threads = check_count(require(doc, "threads", int, where, default=None), where, "threads", optional=True)
     options = {}
     fit_doc = require(doc, "fit", dict, where, default={})
     for key, value in fit_doc.items():
@@ -374,8 +375,8 @@ def run_campaign(campaign, *, scheduler=None, workers=None, threads=None, echo=p
     the ``dask`` extra) before anything is written.
     """
     scheduler = check_scheduler(scheduler)
-    workers = check_count(workers, "--workers")
-    threads = check_count(threads, "--threads")
+    workers = check_count(workers, "--workers", None, optional=True)
+    threads = check_count(threads, "--threads", None, optional=True)
     campaign = campaign if isinstance(campaign, Campaign) else load_campaign(campaign)
     scheduler = check_scheduler(scheduler or campaign.scheduler, campaign.path, "scheduler")
     workers = workers or campaign.workers or os.cpu_count() or 1

@@ -8,6 +8,7 @@ import time
 import warnings
 from pathlib import Path
 
+from .arguments import check_output_folder
 from .errors import InputError, MissingDependency
 
 __all__ = ["main"]
@@ -249,6 +250,35 @@ def _cardless_csv(args):
     return load_dataset(args.dataset, model=args.model)
 
 
+def one_line(message):
+    """``message`` as one printable line: characters that break a line (also for
+    ``str.splitlines``: \\x1c-\\x1e, \\x85, \\u2028...) or are invisible (bidi controls) are
+    written as their escapes, so an argument echoed in an error cannot split or disguise it."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in str(message))
+
+
+def _text(value):
+    """argparse type of an argument without one: any text but a blank one (an empty ``--from ""``
+    was taken for no ``--from``, an empty ``--out ""`` for the current folder)."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError(f"expected a value (got {value!r})")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """The parser of skinfit and its commands: a value of every argument that takes one is
+    checked (``_text`` where no type is given), and its error is one printable line."""
+
+    def add_argument(self, *args, **kwargs):
+        action = super().add_argument(*args, **kwargs)
+        if action.type is None and action.nargs != 0 and action.choices is None:
+            action.type = _text
+        return action
+
+    def error(self, message):
+        super().error(one_line(message))
+
+
 def _lazy(module, function):
     """A command implemented in another module, imported only when it runs."""
 
@@ -261,8 +291,8 @@ def _lazy(module, function):
 
 
 def build_parser():
-    p = argparse.ArgumentParser(prog="skinfit", description="Bayesian inference for published "
-                                "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
+    p = _Parser(prog="skinfit", description="Bayesian inference for published "
+                "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
     p.add_argument("--version", action="version", version=f"skinfit {_version()}")
     p.add_argument("--path", action="append", metavar="DIR", default=[],
                    help="folder with models/, priors/, datasets/ searched first (repeatable); then "
@@ -338,7 +368,7 @@ def build_parser():
     s.add_argument("--correlated", action="store_true", help="correlated (multivariate normal) population")
     s.add_argument("--method", default="gibbs", choices=["gibbs", "reweight"], help="sampler (default gibbs)")
     s.add_argument("--model", help="the model to use from a campaign with several")
-    s.add_argument("--seed", type=int, default=None)
+    s.add_argument("--seed", type=_SEED, default=None)
     s.add_argument("--out", help="output directory (default RUN/population)")
     s.add_argument("--overwrite", action="store_true", help="replace a population already in --out")
     s.set_defaults(func=_lazy("skinfit.population", "cli_population"))
@@ -439,22 +469,28 @@ def _run(args):
         from .paths import check_search_path
 
         check_search_path()  # a mistyped --path or $SKINFIT_PATH folder: refused, not skipped
+        for option in ("out", "report"):  # every such option names a folder: refused now, not after the work
+            if getattr(args, option, None) is not None:
+                noun = "report" if "report" in (option, args.command) else "results"
+                check_output_folder(getattr(args, option), f"--{option}", None,
+                                    f"--{option} names the folder the {noun} {'is' if noun == 'report' else 'are'} "
+                                    "written into")
         code = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handler below
     except InputError as exc:
-        print(f"skinfit: error: {exc}", file=sys.stderr)
+        print(f"skinfit: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except _NothingFound as exc:
         print(exc, file=sys.stderr)
         return 1
     except MissingDependency as exc:
-        print(f"skinfit: error: {exc}", file=sys.stderr)
+        print(f"skinfit: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # MAPError: no start possible, its message names the rows (skinfit.optimize)
         optimize = sys.modules.get("skinfit.optimize")  # not imported at start-up: raised only once it is
         if optimize is None or not isinstance(exc, optimize.MAPError):
             raise
-        print(f"skinfit: error: {exc}", file=sys.stderr)
+        print(f"skinfit: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # e.g. `skinfit models | head`: the reader left; no traceback
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -15,8 +15,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .arguments import check_seed
 from .errors import InputError
-from .evidence import evidence
+from .evidence import METHODS, evidence
+from .fit import as_fits
 from .evidence_methods import bayes_factor_strength
 from .run_labels import run_labels
 
@@ -66,9 +68,13 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
     An approximate estimate's caveat (Laplace: the prior bounds that cut its Gaussian, the
     bracket on log Z from the posterior draws) is in ``table.attrs["caveats"]``, model -> text.
     """
-    fits = list(fits)
+    fits = as_fits(fits, "compare")
     if len(fits) < 2:
         raise InputError("compare", "need at least two fits to compare")
+    if method not in METHODS:
+        raise InputError("compare", f"unknown evidence method {method!r} (expected one of {', '.join(METHODS)})",
+                         field="method")
+    check_seed(rng, "compare")
     hashes = {f.attrs["dataset_sha256"] for f in fits}
     if len(hashes) > 1:
         described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.attrs['dataset_sha256'][:12]})" for f in fits)

@@ -19,16 +19,17 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping
     from .fit import Fit
 
 import itertools
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
 
-from .errors import InputError
-from .fit import _slot_values, as_generator
+from .arguments import check_number, shown
+from .errors import InputError, InputTypeError
+from .fit import _slot_values, as_fit, as_generator
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
 
@@ -84,11 +85,20 @@ def _table(named, prob):
     return pd.DataFrame(rows)
 
 
+def _check_parameter(parameter, prob, where):
+    if not isinstance(parameter, str):
+        raise InputTypeError(where, f"expected the name of a sampled parameter (got {shown(parameter)})",
+                             field="parameter")
+    check_number(prob, where, "prob", lo=0.0, hi=1.0, hi_open=False)
+
+
 def level_contrasts(fit: Fit, parameter: str, prob: float = 0.95) -> pd.DataFrame:
     """All pairwise contrasts between the levels of a split ``parameter`` within one fit.
 
     Paired draws (same chain and draw).  Returns a table with one row per pair (A, B).
     """
+    fit = as_fit(fit, "level_contrasts", "fit")
+    _check_parameter(parameter, prob, "level_contrasts")
     slots = [s["name"] for s in fit.attr("slots") if s["base"] == parameter and s["level"] is not None]
     if len(slots) < 2:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"parameter {parameter!r} is not split "
@@ -109,10 +119,13 @@ def fit_contrasts(fits: Mapping[str, Fit], parameter: str, rng: int | np.random.
         Used to resample every posterior to the shortest length before pairing by index.
     """
     rng = as_generator(rng)
-    if not isinstance(fits, dict):
+    _check_parameter(parameter, prob, "fit_contrasts")
+    if not isinstance(fits, Mapping):
         from .groups import load_groups
 
         fits = load_groups(fits)
+    fits = {label: f if callable(getattr(f, "attr", None)) and callable(getattr(f, "group", None))  # a Fit or
+            else as_fit(f, "fit_contrasts", f"fits[{label!r}]") for label, f in fits.items()}  # population.DrawsFit
     if len(fits) < 2:
         raise InputError("fit_contrasts", f"expected at least two fits (got {len(fits)})", field="fits")
     values = {label: draws(f, parameter) for label, f in fits.items()}

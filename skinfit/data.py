@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ._toml import available, find_file, read_regular, read_toml, require
+from .arguments import check_path
 from .errors import InputError
 from .models import _display, check_id
 from .units import NONNEGATIVE, parse_unit
@@ -202,7 +203,7 @@ def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
     against its card.  A card's data ``file`` must lie inside the card's folder.
     """
     max_bytes = max_data_bytes() if max_bytes is None else max_bytes
-    p = Path(name)
+    p = Path(check_path(name, "load_dataset", None, "a dataset id, its folder or card, or a CSV file"))
     if p.suffix.lower() in (".csv", ".txt") or (p.exists() and not p.is_dir() and p.suffix != ".toml"):
         return _load_csv(p, model=model, units=units, max_bytes=max_bytes)
     card = find_file("datasets", name)
@@ -387,6 +388,7 @@ def as_dataset(data, model=None, units=None):
         return data
     if isinstance(data, pd.DataFrame):
         return from_frame(data, units=units, model=model)
+    check_path(data, "dataset", None, "a Dataset, a pandas DataFrame, a dataset id, its folder or card, or a CSV file")
     if units and Path(data).suffix.lower() not in (".csv", ".txt"):
         raise InputError("units", "units= applies to a DataFrame or a CSV; a dataset card states its units")
     return load_dataset(data, model=model, units=units)

@@ -21,6 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .arguments import check_count, check_output_folder
+from .errors import InputError
+
 __all__ = ["DEMO_OPTIONS", "demo_plan", "run_demo"]
 
 #: How the demo fits each shipped dataset, where the default (all rows, nothing split) does not
@@ -118,7 +121,6 @@ def _run_one(item, path):
 
 def _fit_one(item, path):
     from .data import load_dataset
-    from .errors import InputError
     from .fit import fit
 
     t0 = time.perf_counter()
@@ -173,12 +175,18 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     from .fit import load_fit
     from .paths import explicit_search_path, set_search_path
     from .report import claim_report_folder, write_report
-    from .workers import check_count
 
-    check_count(jobs, "--jobs")  # a count >= 1 or None, before any work
-    out = Path(out)
+    out = check_output_folder(out, "demo", "out")
+    report = check_output_folder(report, "demo", "report")
+    seed = check_count(seed, "demo", "seed", lo=0, hi=2**63 - 1)
+    jobs = check_count(jobs, "demo", "jobs", optional=True)
+    plan = demo_plan(seed)
+    unknown = sorted(set(datasets or ()) - {p["dataset"] for p in plan})
+    if unknown:
+        raise InputError("demo", f"no shipped dataset {', '.join(map(repr, unknown))} in the demo (shipped: "
+                         f"{', '.join(sorted({p['dataset'] for p in plan}))})", field="dataset")
     claim_report_folder(Path(report))  # a folder of the user's files is refused now, not after the fits
-    plan = [p for p in demo_plan(seed) if datasets is None or p["dataset"] in datasets]
+    plan = [p for p in plan if datasets is None or p["dataset"] in datasets]
     paths = [_path(out, p) for p in plan]
     reused = [_reuse(path, p) for p, path in zip(plan, paths)]
     todo = [(p, path) for p, path, f in zip(plan, paths, reused) if f is None]

@@ -8,8 +8,8 @@ than it passes to ``Exception.__init__`` inherits :class:`Portable`, and
 
 import pickle
 
-__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "MissingDependency", "require_optional",
-           "Portable", "WorkerError", "portable", "error_line"]
+__all__ = ["InputError", "InputTypeError", "ForwardError", "ConvergenceWarning", "SupportWarning", "MissingDependency",
+           "require_optional", "Portable", "WorkerError", "portable", "error_line"]
 
 
 class Portable:
@@ -52,6 +52,19 @@ class InputError(Portable, ValueError):
         if row is not None:
             loc += f", row {row}"
         super().__init__(f"{loc}: {what}")
+
+
+class InputTypeError(InputError, TypeError):
+    """An argument of the wrong type (a dict or an array where a path or a Fit is expected, a
+    bool or a float where a count is): an InputError (one line, naming the argument) that is
+    also the TypeError Python's convention expects."""
+
+
+class ForwardError(InputError):
+    """A model's forward function broke its contract (skinfit.registry.ROLES): it raised,
+    returned something other than ``(dict of (k, n) real arrays, bool (k, n) ok)``, returned
+    NaN or inf at a point it marks valid, or is not vectorised over parameter draws.  ``where``
+    is the model card, ``field`` its ``forward`` key."""
 
 
 class ConvergenceWarning(UserWarning):

@@ -14,18 +14,23 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # names used only in annotations
     from .fit import Fit
 
+import inspect
 import json
 import time
 
 import numpy as np
 
+from .arguments import check_count, check_flag, check_seed
 from .errors import InputError
 from .evidence_methods import LaplaceError, LogEvidence, bridge_sampling, laplace, nested
-from .fit import as_generator
+from .fit import as_fit, as_generator
 
 __all__ = ["evidence", "posterior_draws", "METHODS"]
 
 METHODS = ("bridge", "laplace", "nested")
+_ESTIMATORS = {"bridge": bridge_sampling, "laplace": laplace}
+#: Most repeats of one estimate (each is a whole estimate; their spread is the error's check).
+MAX_REPEATS = 10_000
 
 
 def posterior_draws(fit):
@@ -55,8 +60,20 @@ def evidence(fit: Fit, method: str = "bridge", *, rng: int | np.random.Generator
     both sides (its ``caveat`` gives the bracket); where a Gaussian cannot describe the
     posterior it raises :class:`~skinfit.InputError` in one line naming why.
     """
+    fit = as_fit(fit, "evidence", "fit")
     if method not in METHODS:
-        raise ValueError(f"unknown evidence method {method!r} (expected one of {', '.join(METHODS)})")
+        raise InputError("evidence", f"unknown evidence method {method!r} (expected one of {', '.join(METHODS)})",
+                         field="method")
+    check_seed(rng, "evidence")
+    n_repeats = check_count(n_repeats, "evidence", "n_repeats", hi=MAX_REPEATS)
+    refresh = check_flag(refresh, "evidence", "refresh")
+    if method != "nested":  # nested passes its options on to dynesty, which names an unknown one itself
+        known = [n for n, p in inspect.signature(_ESTIMATORS[method]).parameters.items()
+                 if p.kind is p.KEYWORD_ONLY and n not in ("rng", "n_repeats", "ess")]
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            raise InputError("evidence", f"unknown option(s) {', '.join(unknown)} of method {method!r} (options: "
+                                         f"{', '.join(known)})", field="options")
     cache = json.loads(fit.attrs.get("evidence", "{}"))
     if (method in cache and not refresh and cache[method].get("n_repeats", 1) >= n_repeats
             and (method != "laplace" or "caveat" in cache[method])):  # an unchecked Laplace value is redone

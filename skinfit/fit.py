@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
 
 import errno
 import json
@@ -23,6 +23,7 @@ import shutil
 import sys
 import time
 import warnings
+from collections.abc import Iterable, Mapping
 from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from functools import lru_cache
@@ -37,7 +38,9 @@ from ._xarray import defer_imports
 from .data import Dataset, as_dataset
 from .labels import annotate
 from .units import si_unit
-from .errors import ConvergenceWarning, InputError
+from .arguments import (available_memory as _available_memory, check_count, check_flag, check_input_file,
+                        check_mapping, check_memory, check_output_file, check_path, check_seed, shown)
+from .errors import ConvergenceWarning, InputError, InputTypeError
 from .models import Model, load_model
 from .guardrails import check_run
 from .provenance import input_lines, input_record, inputs_of, warn_shadows
@@ -92,13 +95,12 @@ _VERSIONED = ("skinfit", "numpy", "scipy", "emcee", "nlopt", "arviz", "arviz-bas
               "xarray", "pandas")
 
 
-def as_generator(rng):
-    """SPEC 7: an int seed, None or a numpy Generator -> a numpy Generator."""
+def as_generator(rng, where="rng"):
+    """SPEC 7: an int seed >= 0, None or a numpy Generator -> a numpy Generator (InputTypeError,
+    a TypeError, for anything else: a float, a bool, a string)."""
     if isinstance(rng, np.random.Generator):
         return rng
-    if rng is None or isinstance(rng, (int, np.integer)):
-        return np.random.default_rng(rng)
-    raise TypeError(f"rng must be an int seed, None or numpy.random.Generator (got {type(rng).__name__})")
+    return np.random.default_rng(check_seed(rng, where, None))
 
 
 def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
@@ -166,6 +168,14 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     _fitting()
     _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
                     checkpoint_every=checkpoint_every)
+    n_global = check_count(n_global, "fit", "n_global")
+    n_local = check_count(n_local, "fit", "n_local", lo=0, hi=n_global)
+    n_prior_draws = check_count(n_prior_draws, "fit", "n_prior_draws")
+    progress, strict, resume = (check_flag(v, "fit", k) for k, v in
+                                (("progress", progress), ("strict", strict), ("resume", resume)))
+    if checkpoint is not None:
+        checkpoint = check_output_file(checkpoint, "fit", "checkpoint", "checkpoint")
+    check_mapping(units, "fit", "units", "a mapping column -> unit")
     model, dataset, priors = resolve_inputs(model, dataset, priors, units=units)
     inputs = input_record(model, priors, dataset)  # the files read, and any they hid: said now, not after sampling
     warn_shadows(inputs, model, priors)
@@ -180,8 +190,13 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     rng = as_generator(rng)
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
 
+    if nwalkers is not None and nwalkers < 2 * post.ndim:  # emcee's ensemble moves need it
+        raise InputError("fit", f"expected at least 2 walkers per sampled parameter, {2 * post.ndim} for the "
+                                f"{post.ndim} of this fit (got {nwalkers}; default {default_walkers(post)})",
+                         field="nwalkers")
     nwalkers = nwalkers or default_walkers(post)
     _memory_budget(post)  # refuse now, not after sampling, data too large to complete
+    check_sizes(post, nwalkers, max_steps, n_global, n_prior_draws)
     ckpt, saved = None, None
     if checkpoint is not None:
         from .checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
@@ -233,7 +248,9 @@ def resolve_inputs(model, dataset, priors=None, *, units=None):
     _fitting()  # PriorSet and load_priors
     model = model if isinstance(model, Model) else load_model(model)
     dataset = as_dataset(dataset, model=model, units=units)
-    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    if not (priors is None or isinstance(priors, PriorSet)):
+        check_path(priors, "priors", None, "a PriorSet, a prior file id or the path of a prior file")
+    priors = priors if isinstance(priors, PriorSet) else load_priors(model.id if priors is None else priors)
     return model, dataset, priors
 
 
@@ -251,6 +268,25 @@ def _check_settings(rng, **settings):
         if not ok or not (0 < value < float("inf")):
             raise InputError("fit", f"expected {'a whole number' if integer else 'a finite number'} > 0 "
                                     f"(got {value!r})", field=name)
+
+
+def check_sizes(post, nwalkers, max_steps, n_global, n_prior_draws):
+    """Refuse counts whose arrays would not fit in the memory available now: the chain if it runs
+    to ``max_steps`` (emcee keeps every step of every walker, and doubles the array while it
+    grows it), the ``n_global`` prior draws of the MAP search and the ``n_prior_draws`` of the
+    prior group, all float64 (InputError with the estimate, before the MAP)."""
+    where = f"fit of {post.model.id} on {post.dataset.id}"
+    d, available = post.ndim, available_memory()
+    per_step = 2 * nwalkers * (d + 2) * 8
+    check_memory(per_step, where, "nwalkers", f"one step of {nwalkers:,} walkers x {d} parameters",
+                 fix="give fewer walkers", available=available)
+    check_memory(per_step * max_steps, where, "max_steps", f"a chain of {max_steps:,} steps x {nwalkers:,} walkers x "
+                 f"{d} parameters", fix=f"give max_steps (--max-steps) at most {max(1, int(available // per_step)):,}",
+                 available=available)
+    check_memory(6 * n_global * (d + 1) * 8, where, "n_global", f"scoring {n_global:,} prior draws",
+                 fix="give a smaller n_global", available=available)
+    check_memory(2 * n_prior_draws * (d + 1) * 8, where, "n_prior_draws", f"{n_prior_draws:,} prior draws",
+                 fix="give a smaller n_prior_draws", available=available)
 
 
 def start(post, rng, *, nwalkers, n_global=2000, n_local=4):
@@ -389,11 +425,7 @@ MEMORY_FRACTION = 0.25
 
 def available_memory():
     """Bytes of memory available now (psutil if installed, else the free physical pages)."""
-    try:
-        import psutil
-    except ImportError:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    return int(psutil.virtual_memory().available)
+    return _available_memory()
 
 
 def pointwise_bytes(n_obs, n_rows, n_draws):
@@ -819,8 +851,9 @@ class Fit:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the fit as NetCDF, atomically (temporary file + rename), with every group (a
-        pending fit is completed first)."""
-        path = Path(path)
+        pending fit is completed first).  ``path`` is the file (a directory, a device such as
+        /dev/null or a FIFO there is refused first)."""
+        path = check_output_file(path, "Fit.save", "path", "fit")
         path.parent.mkdir(parents=True, exist_ok=True)
         # HDF5 writes into memory, never onto a disk that may fill (on a full disk it crashed the
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
@@ -885,25 +918,39 @@ def _dask_unimported():
             del sys.modules[name]
 
 
-def as_fit(obj) -> Fit:
-    """A :class:`Fit` from a Fit, its DataTree or the path of a saved fit (:func:`load_fit`)."""
+def as_fit(obj, where="fit", field=None) -> Fit:
+    """A :class:`Fit` from a Fit, its DataTree or the path of a saved fit (:func:`load_fit`);
+    InputTypeError naming ``where`` (the function) and ``field`` (the argument) for anything else."""
     if isinstance(obj, Fit):
         return obj
     if isinstance(obj, (str, os.PathLike)):
         return load_fit(obj)
-    if "model_id" in getattr(obj, "attrs", {}):
+    if isinstance(obj, xr.DataTree) and "model_id" in obj.attrs:
         return Fit(obj)
-    raise TypeError(f"expected a skinfit Fit, its DataTree or a path to fit.nc (got {type(obj).__name__})")
+    raise InputTypeError(where, f"expected a skinfit Fit, its DataTree or the path of a fit.nc (got {shown(obj)})",
+                         field=field)
+
+
+def as_fits(fits, where, field="fits"):
+    """A list of Fits from a sequence (or the values of a mapping) of what :func:`as_fit`
+    accepts; InputTypeError naming the position of the first that is none of them."""
+    if isinstance(fits, Mapping):
+        fits = list(fits.values())
+    if isinstance(fits, (str, bytes, os.PathLike, Fit)) or not isinstance(fits, Iterable):
+        raise InputTypeError(where, f"expected a list of fits (Fit objects or paths of fit.nc) (got {shown(fits)})",
+                             field=field)
+    return [as_fit(f, where, f"{field}[{i}]") for i, f in enumerate(fits)]
 
 
 def fit_file(path) -> Path:
-    """The file of a saved fit: ``path`` itself, or ``path/fit.nc`` for a run directory."""
-    path = Path(path)
+    """The file of a saved fit: ``path`` itself, or ``path/fit.nc`` for a run directory (a
+    regular file: a FIFO or a device is refused before HDF5 opens it and waits on it)."""
+    path = Path(check_path(path, "load_fit", None, "the path of a fit.nc or of its run directory"))
     if path.is_dir():
         path = path / "fit.nc"
     if not path.exists():
         raise InputError(path, "no such fit file")
-    return path
+    return check_input_file(path, "fit file")
 
 
 def load_fit(path: str | os.PathLike) -> Fit:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .arguments import check_input_file, check_path, size_text
 from .data import Dataset, load_dataset
 from .errors import InputError, error_line
 from .fit import fit, load_fit, resolve_inputs
@@ -232,12 +233,20 @@ def read_inputs(run):
         return [f"inputs: not recorded in {Path(run) / 'index.json'}"]
 
 
+#: Largest index.json read [bytes] (a campaign's of 10 000 fits is ~5 MB).
+MAX_INDEX_BYTES = 256 << 20
+
 _INDEX_KINDS = "expected a `fit --by` index (with 'groups') or a campaign index (a list)"
 
 
 def index_document(index):
     """An index.json read, with its kind: ``("by", dict)`` for a ``skinfit fit --by`` run's,
     ``("campaign", list of rows)`` for a campaign's; InputError when it is not JSON or neither."""
+    check_input_file(index, "index.json of a run")  # a FIFO or /dev/zero refused, not waited on or read without end
+    size = os.path.getsize(index)
+    if size > MAX_INDEX_BYTES:
+        raise InputError(index, f"{size_text(size)}: larger than any index.json skinfit writes "
+                                f"(at most {size_text(MAX_INDEX_BYTES)} are read)")
     try:
         doc = json.loads(Path(index).read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
@@ -257,7 +266,7 @@ def read_index(path):
     Returns ``(rows, skipped)``: each row a dict with ``model``, ``dataset``, ``group`` (None
     for a whole dataset) and ``path`` (a relative path read from the index's folder; the file
     must exist), and the number of campaign rows not complete (failed or pending)."""
-    path = Path(path)
+    path = Path(check_path(path, "index", None, "a run directory or its index.json"))
     index = path / "index.json" if path.is_dir() else path
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json of `skinfit fit --by` or of a campaign)")
@@ -291,7 +300,7 @@ def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
     answer.  Data edited since the fits were made gives a warning, as do groups whose fit
     failed (listed under ``failed``: they are not among the fits returned).
     """
-    path = Path(path)
+    path = Path(check_path(path, "load_groups", None, "the run directory of `skinfit fit --by` or its index.json"))
     index = path / "index.json" if path.is_dir() else path
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json written by `skinfit fit --by`)")

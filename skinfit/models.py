@@ -27,6 +27,7 @@ import numpy as np
 
 from ._toml import available, find_file, read_toml, require, sha256_file
 from .errors import InputError, SupportWarning
+from .forward_check import forward_error, validated
 from .registry import resolve
 from .units import check_model_unit
 
@@ -149,8 +150,16 @@ class Model:
         if missing:
             raise InputError(f"model {self.id}", f"missing parameters {sorted(missing)}",
                              field="params")
-        scalar = all(np.ndim(v) == 0 for v in params.values())
-        p = {name: np.asarray(params[name], dtype=float).reshape(-1, 1) for name in self.parameter_names}
+        scalar = all(np.ndim(params[name]) == 0 for name in self.parameter_names)
+        p = {}
+        for name in self.parameter_names:
+            try:
+                p[name] = np.asarray(params[name], dtype=float).reshape(-1, 1)
+            except (TypeError, ValueError):
+                raise InputError(f"model {self.id}", f"expected a number or an array of numbers (got "
+                                 f"{type(params[name]).__name__})", field=f"params.{name}") from None
+            if not np.isfinite(p[name]).all():
+                raise InputError(f"model {self.id}", "expected finite numbers (got NaN or inf)", field=f"params.{name}")
         x = {}
         for cov in self.covariates:
             if cov.name not in data:
@@ -158,13 +167,16 @@ class Model:
                                  f"[{cov.unit}]", field="data")
             x[cov.name] = np.asarray(data[cov.name], dtype=float)
         n = len(next(iter(x.values()))) if x else len(data)
-        y, ok = self.evaluate(p, x, constants)
         k = max((v.shape[0] for v in p.values()), default=1)
-        valid = np.broadcast_to(ok, (k, n))
+        y, valid = validated(self, self.evaluate(p, x, constants), k, n, self.observable_names,
+                             "called by predict()")
         out = {}
         for name, arr in y.items():
-            arr = np.broadcast_to(arr, (k, n)).astype(float, copy=True)
-            arr[~valid] = np.nan
+            if (valid & ~np.isfinite(arr)).any():
+                i, j = np.argwhere(valid & ~np.isfinite(arr))[0]
+                raise forward_error(self, f"returned {arr[i, j]} for {name!r} at row {j + 1} of draw {i + 1}, a point "
+                                          "it marks valid (ok True): return ok False where the model is undefined")
+            arr[~valid] = np.nan  # (a new array: validated() copies)
             out[name] = arr[0] if scalar else arr
         valid = valid[0] if scalar else valid
         if not return_valid and not np.all(valid):

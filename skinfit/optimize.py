@@ -164,18 +164,33 @@ def _value_and_gradient(post, box, w, count, h=1e-6):
 
 
 def _nlopt(algorithm, objective, w0, maxeval, xtol_rel, step, ftol_abs=1e-9):
+    """Maximise ``objective`` from ``w0`` in the unit box: (w, value, nlopt code).  An exception
+    raised by the objective (a forward function's ForwardError, Ctrl-C) stops the search and is
+    raised as it was: nlopt itself would turn it into a SystemError."""
     d = len(w0)
     opt = nlopt.opt(algorithm, d)
     opt.set_exceptions_enabled(False)
     opt.set_lower_bounds(np.zeros(d))
     opt.set_upper_bounds(np.ones(d))
-    opt.set_max_objective(objective)
+    raised = []
+
+    def guarded(w, grad):
+        try:
+            return objective(w, grad)
+        except BaseException as exc:  # noqa: BLE001 - kept, the search stopped, and raised again below
+            raised.append(exc)
+            opt.force_stop()
+            return _PENALTY
+
+    opt.set_max_objective(guarded)
     opt.set_xtol_rel(xtol_rel)
     opt.set_ftol_abs(ftol_abs)
     opt.set_maxeval(maxeval)
     w0 = np.clip(w0, 1e-6, 1 - 1e-6)
     opt.set_initial_step(np.minimum(step, np.minimum(w0, 1 - w0) * 0.5 + 1e-9))
     w = opt.optimize(w0)
+    if raised:
+        raise raised[0]
     return np.asarray(w), float(opt.last_optimum_value()), int(opt.last_optimize_result())
 
 

@@ -20,6 +20,7 @@ from functools import lru_cache
 from importlib import metadata, resources
 from pathlib import Path
 
+from .arguments import check_path
 from .errors import InputError
 
 __all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path", "explicit_search_path",
@@ -156,13 +157,20 @@ def entries(kind: str) -> dict[str, Entry]:
 def locate(kind: str, name) -> Path:
     """The card file for ``name``: an existing path (a ``.toml`` file, or a dataset folder) is
     taken as given; otherwise ``name`` is an id looked up on the search path."""
+    what = kind[:-1]
+    check_path(name, f"load_{what}", None, f"a {what} id or the path of its {'card' if what != 'prior' else 'file'}")
     p = Path(name)
     if kind == "datasets" and p.is_dir() and (p / "dataset.toml").is_file():
         return p / "dataset.toml"
     if p.suffix == ".toml" and p.exists():  # a FIFO or device is refused by the reader, not taken for an id
         return p
     if any(c in str(name) for c in "/\\") or ".." in str(name) or str(name).startswith("."):
-        raise InputError(str(name), f"no such {kind[:-1]} file, and an id is a name, not a path")
+        if p.is_dir():
+            raise InputError(str(name), f"is a folder, not a {what} file" + (" (no dataset.toml in it)"
+                                                                            if kind == "datasets" else ""))
+        if p.exists():
+            raise InputError(str(name), f"is not a {what} file (a .toml card)")
+        raise InputError(str(name), f"no such {what} file, and an id is a name, not a path")
     entry = entries(kind).get(str(name))
     if entry is not None:
         return entry.path

@@ -13,8 +13,10 @@ import numpy as np
 from .labels import noise_suffix
 from .units import to_si
 
-from .errors import InputError
+from .arguments import check_mapping, shown
+from .errors import InputError, InputTypeError
 from .data import check_units
+from .forward_check import check_forward, check_quantiles, forward_error
 from .models import NOISE_MODELS, resolve_forward as _resolve
 from .priors import check_priors_for
 from .priors import _LOGPDF
@@ -131,6 +133,11 @@ class Posterior:
         if noise is None or isinstance(noise, str):
             noise = {o: noise or card_noise[o] for o in self.observables}
         else:
+            check_mapping(noise, where, "noise", "a noise model name or a mapping observable -> noise model")
+            unknown = set(noise) - set(self.observables)
+            if unknown:
+                raise InputError(where, f"no observable {sorted(map(str, unknown))} in the data (observables: "
+                                 f"{', '.join(self.observables)})", field="noise")
             noise = {o: noise.get(o, card_noise[o]) for o in self.observables}
         for o, kind in noise.items():
             if kind not in NOISE_MODELS:
@@ -139,6 +146,7 @@ class Posterior:
         self.noise = noise
         from .models import check_constant
 
+        check_mapping(constants, where, "constants", "a mapping constant name -> number")
         self.constants = {**model.constants, **{k: check_constant(k, v, where) if k in model.constants else v
                                                 for k, v in (constants or {}).items()}}
         unknown = set(constants or {}) - set(model.constants)
@@ -175,9 +183,14 @@ class Posterior:
         self._sum_logy = {o: float(v.sum()) for o, v in self._logy.items()}
 
         # which sampled slot feeds each parameter
-        split = dict(model.split if split is None else split)
+        split = dict(model.split if split is None else
+                     check_mapping(split, where, "split", "a mapping parameter -> column or list of columns"))
         self.split = {}
         for pname, cols in split.items():
+            if not (isinstance(cols, str) or isinstance(cols, (list, tuple))
+                    and cols and all(isinstance(c, str) for c in cols)):
+                raise InputTypeError(where, f"expected {pname} = a column name or a list of column names "
+                                     f"(got {shown(cols)})", field="split")
             if pname not in model.parameter_names:
                 raise InputError(where, f"cannot split unknown parameter {pname!r} (parameters: "
                                  f"{', '.join(model.parameter_names)})", field="split")
@@ -221,6 +234,16 @@ class Posterior:
         self._prior_groups = _prior_groups(self.slots)
         self._log_norm = float(sum(s.prior._log_norm for s in self.slots))
         self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
+        self._check_forward()
+
+    def _check_forward(self):
+        """The forward function on a few prior quantiles (no random draw) at the data's distinct
+        rows, checked against its contract (skinfit.forward_check) before any work starts."""
+        theta = self.prior_transform(check_quantiles(self.ndim))
+        params = {p: _take(theta, j) for p, j in self._param_index_u.items()}
+        with np.errstate(all="ignore"):  # what the function computes is checked, not how
+            check_forward(self.model, params, self._xu, self.constants, self.observables,
+                          rows=self._first + 1, points=[dict(zip(self.names, t)) for t in theta])
 
     def _unique_rows(self):
         """Repeated measurements: the forward model runs once per distinct row (covariates and
@@ -575,14 +598,32 @@ class Posterior:
         ll = self.log_likelihood(sub)
         self.counts["outside_support"] += int(np.isneginf(ll).sum())
         if np.isnan(ll).any():
-            bad = sub[np.isnan(ll)][0]
-            raise FloatingPointError(f"{self.model.id}: NaN log-likelihood at "
-                                     f"{dict(zip(self.names, bad))} (a bug in the forward function)")
+            raise self._nan_error(sub[np.isnan(ll)][0])
         if n_in == len(theta):
             return lp + ll
         out = np.full(len(theta), -np.inf)
         out[inside] = lp[inside] + ll
         return out
+
+    def _nan_error(self, theta):
+        """ForwardError for a NaN log-likelihood at parameter vector ``theta`` (d,) met while
+        fitting (MAP search or sampling), naming the data row and the prediction there: NaN
+        where the forward function marks the model valid (it must say ok False there)."""
+        with np.errstate(all="ignore"):
+            ll, pred, _ = self._evaluate_block(theta[None], True)
+        point = ", ".join(f"{name}={v:.6g}" for name, v in zip(self.names, theta))
+        for o in self.observables:
+            rows = np.flatnonzero(np.isnan(ll[o][0]))
+            if len(rows):
+                r, value = rows[0], pred[o][0, rows[0]]
+                if np.isnan(value):
+                    return forward_error(self.model, f"returned nan for {o!r} at data row {r + 1} with parameters "
+                                                     f"{{{point}}}, a point it marks valid (ok True), while fitting: "
+                                                     "return ok False where the model is undefined, or fix the "
+                                                     "function")
+                return forward_error(self.model, f"NaN log-likelihood for {o!r} at data row {r + 1} (prediction "
+                                                 f"{value:g}) with parameters {{{point}}}, while fitting")
+        return forward_error(self.model, f"NaN log-likelihood at parameters {{{point}}} while fitting")
 
     def __call__(self, z):
         """log posterior density of the sampled coordinates z (k, d), Jacobian included."""

@@ -195,10 +195,18 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         if hasattr(post, "counts"):
             post.counts.update(saved)
 
+    raised = []  # an error of the target (a forward function's ForwardError), raised after its step
+
     def log_prob(z):  # the target, counting its evaluations (moves make 1 to k a walker and step)
         nonlocal evaluated
+        if raised:
+            return np.full(len(z), -np.inf)
         evaluated += len(z)
-        return post(z)
+        try:
+            return post(z)
+        except Exception as exc:  # noqa: BLE001 - emcee would print its traceback: kept, raised after the step
+            raised.append(exc)
+            return np.full(len(z), -np.inf)
 
     def tally():  # the evaluation counters, for the checkpoint
         return {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated}
@@ -231,6 +239,8 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
             target = min([c for c in checks if c >= n] + ([next_adapt] if next_adapt is not None else []))
             if target > n:
                 for state in sampler.sample(state, iterations=target - n):
+                    if raised:
+                        raise raised[0]
                     counts = tally()
                     if bar is not None:
                         bar.update(1)

@@ -32,13 +32,15 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from .arguments import check_count, check_memory, check_number, shown
 from .data import Dataset, list_datasets, load_dataset
-from .errors import ConvergenceWarning, InputError
+from .errors import ConvergenceWarning, InputError, InputTypeError
+from .fit import check_sizes, default_walkers
 from .models import Model, load_model
 from .outputs import check_outputs
 from .posterior import Posterior
 from .priors import PriorSet, load_priors
-from .workers import check_count, forkable
+from .workers import forkable
 
 __all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "cli_sbc"]
 
@@ -147,14 +149,32 @@ def run_sbc(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_
     -------
     SBCResult
     """
-    check_count(jobs, "jobs")  # a count >= 1 or None, before any work
+    where = "run_sbc"
+    n_sims = check_count(n_sims, where, "n_sims")
+    n_draws = check_count(n_draws, where, "n_draws")
+    seed = check_count(seed, where, "seed", lo=0)
+    n_rows = check_count(n_rows, where, "n_rows", optional=True)
+    ess_target = check_number(ess_target, where, "ess_target")
+    max_steps = check_count(max_steps, where, "max_steps")
+    n_global = check_count(n_global, where, "n_global")
+    alpha = check_number(alpha, where, "alpha", hi=1.0)
+    jobs = check_count(jobs, where, "jobs")
+    if progress is not None and not callable(progress):
+        raise InputTypeError(where, f"expected a function of one message, or None (got {shown(progress)})",
+                             field="progress")
     model = model if isinstance(model, Model) else load_model(model)
-    priors = priors if isinstance(priors, PriorSet) else load_priors(priors or model.id)
+    priors = priors if isinstance(priors, PriorSet) else load_priors(model.id if priors is None else priors)
     fit_priors = priors if fit_priors is None else (
         fit_priors if isinstance(fit_priors, PriorSet) else load_priors(fit_priors))
     design = _rows(design_dataset(model, dataset), n_rows)
     post = Posterior(model, priors, design, split=split)
     names = list(post.names)
+    # the simulations' records (a seed, ranks and a row each) and one fit's arrays, before the first is run
+    check_memory(n_sims * (len(names) + 64) * 8 * 4, where, "n_sims", f"{n_sims:,} simulations' records",
+                 fix="give fewer simulations (n_sims, --n-sims)")
+    check_memory(2 * n_draws * len(names) * 8, where, "n_draws", f"{n_draws:,} ranked draws of each simulation",
+                 fix="give fewer draws (n_draws, --draws)")
+    check_sizes(post, default_walkers(post), max_steps, n_global, 10)
     job = _Job(post, design, fit_priors, split, ess_target, max_steps, n_global, n_draws, seed)
     seeds = np.random.SeedSequence(seed).spawn(n_sims)
     ranks, truths, runs = [], [], []

@@ -23,7 +23,7 @@ from threadpoolctl import threadpool_info, threadpool_limits
 from .checkpoint import watch_parent
 from .errors import InputError, WorkerError, portable, require_optional
 
-__all__ = ["THREAD_VARIABLES", "SCHEMES", "check_scheduler", "check_count", "worker_threads", "limited_threads",
+__all__ = ["THREAD_VARIABLES", "SCHEMES", "check_scheduler", "worker_threads", "limited_threads",
            "thread_count", "run_isolated", "collect", "crossing", "forkable"]
 
 #: Environment variables by which a user sets the threads of BLAS/OpenMP libraries; any of them
@@ -57,13 +57,6 @@ def check_scheduler(value, where="--scheduler", field=None, *, need_dask=True):
             raise InputError(where, expected, field=field)
     if need_dask:
         require_optional("distributed", "dask")
-    return value
-
-
-def check_count(value, where, field=None):
-    """An optional count (workers, threads): None, or an integer >= 1; else an InputError."""
-    if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-        raise InputError(where, f"expected an integer >= 1 (got {value!r})", field=field)
     return value
 
 

@@ -486,10 +486,10 @@ def test_scheduler_without_dask_installed_is_refused_in_one_line(tmp_path, capsy
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"scheduler": "banana"}, r"^--scheduler: expected 'local'"),
-    ({"workers": 0}, r"^--workers: expected an integer >= 1 \(got 0\)"),
-    ({"workers": -1}, r"^--workers: expected an integer >= 1 \(got -1\)"),
-    ({"workers": "2"}, r"^--workers: expected an integer >= 1 \(got '2'\)"),
-    ({"threads": 0}, r"^--threads: expected an integer >= 1 \(got 0\)"),
+    ({"workers": 0}, r"^--workers: expected a whole number >= 1 \(got 0\)"),
+    ({"workers": -1}, r"^--workers: expected a whole number >= 1 \(got -1\)"),
+    ({"workers": "2"}, r"^--workers: expected a whole number >= 1 \(got '2'\)"),
+    ({"threads": 0}, r"^--threads: expected a whole number >= 1 \(got 0\)"),
 ])
 def test_run_campaign_arguments_are_checked_before_any_work(tmp_path, kwargs, match):
     data, _ = write_population(tmp_path, n_subjects=1)
@@ -501,7 +501,7 @@ def test_run_campaign_arguments_are_checked_before_any_work(tmp_path, kwargs, ma
 
 @pytest.mark.parametrize("line, match", [
     ('scheduler = "banana://host:1"', r"scheduler: expected 'local' or a Dask scheduler's address"),
-    ("threads = 0", r"threads: expected an integer >= 1 \(got 0\)"),
+    ("threads = 0", r"threads: expected a whole number >= 1 \(got 0\)"),
     ("workers = true", r"workers: expected an integer"),
 ])
 def test_campaign_file_scheduler_and_counts_are_checked(tmp_path, line, match):

@@ -223,6 +223,6 @@ def test_process_counts_of_the_python_entry_points_are_checked_before_any_work(e
 
     call = {"run_sbc": lambda: run_sbc("electroadhesion_coulomb", n_sims=2, jobs=jobs),
             "run_demo": lambda: run_demo(tmp_path / "d", tmp_path / "r", jobs=jobs)}[entry]
-    with pytest.raises(InputError, match=r"jobs: expected an integer >= 1 \(got "):
+    with pytest.raises(InputError, match=r"jobs: expected a whole number >= 1 \(got "):
         call()
     assert not list(tmp_path.iterdir())
