@@ -432,9 +432,17 @@ def _os_error_text(exc):
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .paths import set_search_path
+    from .paths import explicit_search_path, set_search_path
 
+    before = explicit_search_path()  # main() may run inside a process (a notebook, a test): put it back after
     set_search_path(args.path)
+    try:
+        return _main(args)
+    finally:
+        set_search_path(before)
+
+
+def _main(args):
     out = Path(args.out).absolute() if isinstance(getattr(args, "out", None), str) else None
     while out is not None and not out.parent.exists():  # the topmost folder the command may create
         out = out.parent

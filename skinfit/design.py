@@ -1312,6 +1312,19 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     n_out = min(n_outer, len(problem.draws) // 2)  # what eig_nmc takes of the draws left
     n_in = min(n_inner, len(problem.draws) - n_out)
 
+    rivals = []  # the competing models, their priors and noise kinds: read and checked before the work
+    for other in discriminate:
+        m = load_model(other)
+        missing = [c.name for c in m.covariates if c.name not in X and not c.optional]
+        if missing:
+            raise InputError("--discriminate", f"model {m.id!r} needs covariate {missing[0]!r}, which the "
+                             f"candidates do not give")
+        pr = load_priors(m.id)
+        kinds = {o.name: o.noise for o in m.observables}
+        if set(kinds) != set(noise):
+            raise InputError("--discriminate", f"model {m.id!r} observes {sorted(kinds)}, not {sorted(noise)}")
+        rivals.append((m, pr, kinds))
+
     single_nmc = eig_nmc(problem, X, rng, params=params, n_outer=n_outer, n_inner=n_inner)
     disc_table = None
     if discriminate:
@@ -1320,16 +1333,7 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
 
         obs = model.observable_names
         problems = [_replace(problem, noise_priors=tuple(priors[f"sigma{noise_suffix(obs, o)}"] for o in obs))]
-        for other in discriminate:
-            m = load_model(other)
-            missing = [c.name for c in m.covariates if c.name not in X and not c.optional]
-            if missing:
-                raise InputError("--discriminate", f"model {m.id!r} needs covariate {missing[0]!r}, which the "
-                                 f"candidates do not give")
-            pr = load_priors(m.id)
-            kinds = {o.name: o.noise for o in m.observables}
-            if set(kinds) != set(noise):
-                raise InputError("--discriminate", f"model {m.id!r} observes {sorted(kinds)}, not {sorted(noise)}")
+        for m, pr, kinds in rivals:
             nz, _ = _noise_setup(m, pr, kinds, 1.0)
             prob = _prior_problem(m, pr, rng, n_draws, nz, sigma)
             prob = _replace(prob, noise_priors=tuple(pr[f"sigma{noise_suffix(obs, o)}"] for o in obs))

@@ -123,7 +123,8 @@ def test_class8_strict_by_runs_fail_on_a_warned_group(tmp_path, monkeypatch, war
 
     groups = importlib.import_module("skinfit.groups")
     index = pd.DataFrame({"group": ["a", "b"], "rows": [5, 5], "seed": [1, 2], "converged": [True, True],
-                          "warnings": [0, warned], "seconds": [0.1, 0.1], "path": ["a/fit.nc", "b/fit.nc"]})
+                          "warnings": [0, warned], "seconds": [0.1, 0.1], "path": ["a/fit.nc", "b/fit.nc"],
+                          "status": ["done", "done"]})
     monkeypatch.setattr(groups, "fit_by", lambda *a, **k: index)
     from skinfit.cli import main
 
