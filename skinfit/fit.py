@@ -848,13 +848,14 @@ class Fit:
 
     def _repr_html_(self) -> str:
         """Notebook view: model and data, the seed, the convergence verdict with its reasons,
-        the guard-rail warnings and the summary table."""
+        the guard-rail warnings and notes and the summary table."""
         from html import escape
 
         s = self.attr("sampler")
         verdict = ("<b style='color:#1a7f37'>converged</b>" if s["converged"] else
                    "<b style='color:#cf222e'>NOT converged</b>: " + escape("; ".join(s["reasons"])))
-        items = "".join(f"<li><b>{escape(w['status'])}</b> {escape(w['message'])}</li>" for w in self.warnings)
+        items = "".join(f"<li><b>{escape(w['status'])}</b> {escape(w['message'])}</li>"
+                        for w in self.warnings + self.notes)
         seed = int(self.attrs.get("seed", -1))
         with pd.option_context("display.float_format", "{:.4g}".format):
             table = self.summary().to_html(float_format="{:.4g}".format, border=0)

@@ -32,24 +32,27 @@ earlier one left out); and PSIS-LOO (Vehtari, Gelman & Gabry 2017) Pareto k > ``
 (0.7): rows whose left-out posterior the full posterior cannot stand in for.
 
 A p-value warns below ``ALPHA`` / m, m the number of p-values (Bonferroni: at most ``ALPHA`` of
-fits of a correct model warn).  ``ALPHA`` is 0.02, not 0.05: the serial, levels and unused-column
-checks are near-exact (their p-values near uniform on data from the fitted model; chi_square and
-the covariate trends are conservative), and a fit's warnings together (sampling guard rails
-too) must stay under 5% of fits of a correct model (measured in bench/results/misfit.md).  The
+fits of a correct model warn).  ``ALPHA`` is 0.02, not 0.05: posterior-predictive p-values of
+statistics the fitted parameters barely move (serial correlation, groups and quantities the model
+does not use) are near uniform on data from the fitted model, so Bonferroni's bound is nearly
+reached, and a fit's warnings together (the sampling guard rails too) must stay under 5% of
+fits of a correct model (measured per model family in bench/results/misfit.md).  The
 Pareto k check (on the ``LOO_ROWS`` (500) rows whose log-likelihood varies most, ``LOO_DRAWS``
 (1000) draws) warns when at least 2 rows, and ``PARETO_SHARE`` (1%) of the rows checked,
 exceed 0.7 (a single influential row occurs in fits of a correct model: 1 of the bench's 105).
 
 Where it runs: with the pointwise groups (:meth:`skinfit.fit.Fit.complete`, so ``skinfit fit``,
 ``Fit.save``, reports and compare), not in :func:`skinfit.fit`, which returns at the converged
-posterior.  Cost: ``PPC_DRAWS`` (400, or 3 m / ``ALPHA`` if more, so that p-values reach a third of
-the threshold) draws' predictions plus PSIS on at most 500 rows (see the wall-time figures in bench/results/misfit.md).
+posterior.  Cost: the predictions and statistics of ``PPC_DRAWS`` (400, or 3 m / ``ALPHA`` if
+more, so that p-values reach a third of the threshold) draws on every row, and PSIS on at most
+500 rows: linear in draws x rows (wall times in bench/results/misfit.md).
 """
 
 import math
 import warnings
 
 import numpy as np
+from scipy import sparse
 
 from .units import dimension
 
@@ -152,10 +155,23 @@ def _orders(post):
     return out
 
 
-def _bin_stat(r, order, starts, counts):
-    """sum_b (sum of r in bin b)^2 / n_b for each row of ``r`` (k, n)."""
-    sums = np.add.reduceat(r[:, order], starts, axis=1)
-    return (sums * sums / counts).sum(axis=1)
+def _indicators(groupings, n):
+    """The groupings' bins and levels as one sparse (n, G) 0/1 matrix (G all their groups
+    together), the start of each grouping's columns and the rows in each group: ``r @ B`` sums
+    the residuals of every group of every grouping at once."""
+    sizes = [int(codes.max()) + 1 for _, _, codes, _ in groupings]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(int)
+    cols = np.concatenate([codes + start for (_, _, codes, _), start in zip(groupings, starts)])
+    rows = np.tile(np.arange(n), len(groupings))
+    B = sparse.csc_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, int(sum(sizes))))
+    return B, starts, np.bincount(cols, minlength=B.shape[1]).astype(float)
+
+
+def _group_stats(r, B, starts, counts):
+    """sum over the groups of each grouping of (sum of r in the group)^2 / n_group, for each
+    row of ``r`` (k, n): (k, groupings)."""
+    sums = np.asarray(r @ B)
+    return np.add.reduceat(sums * sums / counts, starts, axis=1)
 
 
 def _lag1(r, order):
@@ -194,13 +210,10 @@ def check_fit(post, theta, y_rep, *, log_lik=None, reff=1.0, alpha=ALPHA, n_draw
     """
     S = len(theta)
     obs = list(post.observables)
-    trends, groupings = [], _groupings(post)
-    for o in obs:
-        for c, kind, codes, labels in groupings:
-            order = np.argsort(codes, kind="stable")
-            counts = np.bincount(codes)
-            trends.append((f"{kind}[{o}, {c}]", o, labels, order,
-                           np.concatenate([[0], np.cumsum(counts)[:-1]]), counts.astype(float)))
+    groupings = _groupings(post)
+    trends = [(f"{kind}[{o}, {c}]", o, labels) for o in obs for c, kind, _, labels in groupings]
+    if groupings:
+        B, starts, counts = _indicators(groupings, post.n)
     serial = [(f"serial[{o}, {name}]", o, order) for o in obs for name, order in _orders(post)] if post.n > 2 else []
     names = ["chi_square", "max_residual", "tail_count"] + [t[0] for t in trends] + [s[0] for s in serial]
     # enough draws that the smallest p-value, 1 / (1 + k), is a third of the threshold
@@ -229,8 +242,9 @@ def check_fit(post, theta, y_rep, *, log_lik=None, reff=1.0, alpha=ALPHA, n_draw
             out[0, i:i + step] = (r * r).sum(axis=1)
             out[1, i:i + step] = a.max(axis=1)
             out[2, i:i + step] = (a > TAIL_Z).sum(axis=1)
-            for j, (_name, o, _labels, order, starts, counts) in enumerate(trends):
-                out[3 + j, i:i + step] = _bin_stat(res[o][which], order, starts, counts)
+            for j, o in enumerate(obs if groupings else []):
+                rows = slice(3 + j * len(groupings), 3 + (j + 1) * len(groupings))
+                out[rows, i:i + step] = _group_stats(res[o][which], B, starts, counts).T
             for j, (_name, o, order) in enumerate(serial):
                 out[3 + len(trends) + j, i:i + step] = _lag1(res[o][which], order)
     with np.errstate(invalid="ignore"):
@@ -246,9 +260,11 @@ def check_fit(post, theta, y_rep, *, log_lik=None, reff=1.0, alpha=ALPHA, n_draw
     top = np.argsort(-np.abs(np.nan_to_num(r_mean, nan=np.inf)))[:5]
     worst = [{"row": int(t % n) + 1, "observable": obs[t // n], "r": float(r_mean[t])} for t in top]
     trend_means, labels = {}, {}
-    for name, o, names_, order, starts, counts in trends:
-        rm = r_sum[o][order] / k
-        trend_means[name] = (np.add.reduceat(rm, starts) / counts).round(2).tolist()
+    for j, (name, o, names_) in enumerate(trends):
+        means = np.asarray(r_sum[o] / k @ B) / counts
+        g = j % len(groupings)
+        stop = starts[g + 1] if g + 1 < len(starts) else len(counts)
+        trend_means[name] = means[starts[g]:stop].round(2).tolist()
         if names_ is not None:
             labels[name] = names_
     return {"checks": checks, "pareto_k": pareto, "draws": int(k), "alpha": alpha, "m": m,
