@@ -35,7 +35,6 @@ bench/results/misfit.md.
 import math
 
 import numpy as np
-from scipy import optimize, stats
 
 __all__ = ["STUCK_ACCEPTANCE", "STUCK_LOGP", "BOUND_WINDOW", "BOUND_SHARE", "BOUND_ALPHA", "BOUND_REACH", "PRIOR_DOMINATED",
            "assess_run", "check_run", "bound_share", "bound_test"]
@@ -92,6 +91,10 @@ def bound_test(post, theta, j, side, log_lik=None):
         ``BOUND_REACH`` posterior sds, at most to the physical range), ``p`` (P(chi2_1 > lr) / 2;
         1 when lr = 0), ``beyond`` (the parameter at the relaxed maximum) and ``evaluations``.
     """
+    # imported here, not at the top: a saved fit's figures load this module, and scipy.stats
+    # costs them ~0.5 s (tests/test_startup.py)
+    from scipy import optimize, stats
+
     log = np.array([s.log_scale for s in post.slots])
     tiny = np.finfo(float).tiny  # a shifted-log slot may sit at exactly 0
 
