@@ -36,8 +36,8 @@ import math
 
 import numpy as np
 
-__all__ = ["STUCK_ACCEPTANCE", "STUCK_LOGP", "BOUND_WINDOW", "BOUND_SHARE", "BOUND_ALPHA", "BOUND_REACH", "PRIOR_DOMINATED",
-           "assess_run", "check_run", "bound_share", "bound_test"]
+__all__ = ["STUCK_ACCEPTANCE", "STUCK_LOGP", "BOUND_WINDOW", "BOUND_SHARE", "BOUND_ALPHA", "BOUND_REACH",
+           "PRIOR_DOMINATED", "assess_run", "check_run", "bound_share", "bound_test"]
 
 STUCK_ACCEPTANCE = 0.05
 STUCK_LOGP = 5.0
