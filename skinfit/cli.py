@@ -227,7 +227,7 @@ def _cmd_fit(args):
                           "dataset": result.dataset_id, "dataset_card": None if card is None else str(card),
                           "inputs": result.inputs,
                           "seed": int(result.attrs["seed"]),
-                          "converged": bool(result.converged), "warnings": result.warnings,
+                          "converged": bool(result.converged), "warnings": result.warnings, "notes": result.notes,
                           "summary": json.loads(summary.to_json(orient="index")),
                           "seconds": time.perf_counter() - t0}, indent=2, default=str))
     else:

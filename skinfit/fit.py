@@ -42,7 +42,7 @@ from .arguments import (available_memory as _available_memory, check_count, chec
                         check_mapping, check_memory, check_output_file, check_path, check_seed, shown)
 from .errors import ConvergenceWarning, InputError, InputTypeError
 from .models import Model, load_model
-from .guardrails import check_run
+from .guardrails import assess_run
 from .provenance import input_lines, input_record, inputs_of, warn_shadows
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator", "resolve_inputs"]
@@ -371,8 +371,9 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
             "converged": run.converged, "reasons": list(run.reasons), "evaluations": run.evaluations}),
         "support_counts": json.dumps(dict(post.counts), default=int),
         "support_condition": post.model.support,
-        "warnings": json.dumps(check_run(post, run)),
     }
+    found, notes = assess_run(post, run)
+    attrs["warnings"], attrs["notes"] = json.dumps(found), json.dumps(notes)
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
@@ -527,7 +528,7 @@ def _misfit_line(fit):
                 f"{r['alpha']:g}/{r['m']}")
     pk = r.get("pareto_k")
     bad = [c["check"] for c in r["checks"] if c["warn"]] + (["pareto_k"] if pk and pk["warn"] else [])
-    return (f"fit to the data: {'MISFIT (' + ', '.join(bad) + ')' if bad else 'no misfit found'}: "
+    return (f"fit to the data: {'evidence of MISFIT (' + ', '.join(bad) + ')' if bad else 'no misfit found'}: "
             f"{r['m']} posterior-predictive checks on {r['draws']} draws, smallest p "
             f"{min(c['p'] for c in r['checks']):.3g} (warns below {r['alpha']:g}/{r['m']}); PSIS-LOO Pareto k > 0.7 at "
             + (f"{pk['count']} rows" if pk else "- rows (not computed)"))
@@ -683,6 +684,14 @@ class Fit:
         return json.loads(self.attrs.get("warnings", "[]"))
 
     @property
+    def notes(self):
+        """Information the guard rails record that is not a failure (:mod:`skinfit.guardrails`,
+        e.g. a posterior that reaches a prior bound where the priors put it): dicts like
+        :attr:`warnings`' with status NOTE; ``--strict`` does not act on them.  Empty for a fit
+        saved before notes were recorded."""
+        return json.loads(self.attrs.get("notes", "[]"))
+
+    @property
     def converged(self):
         return bool(self.attr("sampler")["converged"])
 
@@ -716,6 +725,7 @@ class Fit:
         if table is None:
             table = self._compute_summary()
         table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.guardrails, skinfit.misfit)
+        table.attrs["notes"] = self.notes  # information, not failures (skinfit.guardrails)
         self._summary = (key, table)
         return table.copy()
 
@@ -791,7 +801,9 @@ class Fit:
             contraction.append(c)
             notes.append("; ".join(["mostly prior: the data barely determine it"] * (c < 0.5)
                                    + [f"ON A BOUND: {w['message']}" for w in self.warnings
-                                      if w["check"] == "bound" and w["parameter"] == name]))
+                                      if w["check"] == "bound" and w["parameter"] == name]
+                                   + [f"at a bound (note): {w['message']}" for w in self.notes
+                                      if w["parameter"] == name]))
         table["map"] = [self.map[n] for n in table.index]
         table["tau"] = [sampler["tau"][n] for n in table.index]
         table["contraction"] = contraction
@@ -829,6 +841,7 @@ class Fit:
                  f"seed: {seed_text}",
                  f"converged: {'yes' if s['converged'] else 'NO: ' + '; '.join(s['reasons'])}",
                  *[f"{w['status']}: {w['message']}" for w in self.warnings if w["check"] != "convergence"],
+                 *[f"NOTE: {n['message']}" for n in self.notes],
                  _misfit_line(self),
                  *(["note: " + self.attr("pointwise_thinned")["note"]] if "pointwise_thinned" in self.attrs else []),
                  f"walkers {s['nwalkers']}  steps {s['n_steps']}  burn-in {s['burn']}  thin {s['thin']}  "
@@ -880,13 +893,14 @@ class Fit:
 
     def _repr_html_(self) -> str:
         """Notebook view: model and data, the seed, the convergence verdict with its reasons,
-        the guard-rail warnings and the summary table."""
+        the guard-rail warnings and notes and the summary table."""
         from html import escape
 
         s = self.attr("sampler")
         verdict = ("<b style='color:#1a7f37'>converged</b>" if s["converged"] else
                    "<b style='color:#cf222e'>NOT converged</b>: " + escape("; ".join(s["reasons"])))
-        items = "".join(f"<li><b>{escape(w['status'])}</b> {escape(w['message'])}</li>" for w in self.warnings)
+        items = "".join(f"<li><b>{escape(w['status'])}</b> {escape(w['message'])}</li>"
+                        for w in self.warnings + self.notes)
         seed = int(self.attrs.get("seed", -1))
         with pd.option_context("display.float_format", "{:.4g}".format):
             table = self.summary().to_html(float_format="{:.4g}".format, border=0)

@@ -25,7 +25,7 @@ from .errors import InputError
 from .fit import _wall_time_text, as_fit
 from .labels import derived_units, parameter_units
 from .paths import package_version
-from .guardrails import BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
+from .guardrails import BOUND_ALPHA, BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report", "claim_report_folder"]
 
@@ -220,12 +220,16 @@ def fit_diagnostics(fit, summary=None):
     # the issues, the bound row above them only summarises
     bounds = [w.get("parameter") or "" for w in fit.warnings if w.get("check") == "bound"]
     add("posterior mass on a prior bound", "; ".join(bounds) or "none",
-        f"<= {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound", "WARN" if bounds else "ok")
+        f"no pile-up (> {BOUND_SHARE:.0%} of draws within {BOUND_WINDOW} sd of a bound) that the data push past "
+        f"(likelihood-ratio p < {BOUND_ALPHA})", "WARN" if bounds else "ok")
     for w in fit.warnings:  # whatever the fit recorded: guard rails, model-fit (misfit) checks...
         if w.get("check") not in ("convergence", "acceptance"):  # already rows above
             add(f"guard rail: {w.get('check', 'unnamed')}" + (f" ({w['parameter']})" if w.get("parameter") else ""),
                 "tripped", "recorded with the fit (Fit.warnings)", w.get("status", "WARN"),
                 w.get("message", json.dumps(w, default=str)))
+    for n in fit.notes:  # information the guard rails recorded, not failures (--strict ignores them)
+        add(f"note: {n.get('check', 'unnamed')}" + (f" ({n['parameter']})" if n.get("parameter") else ""),
+            n.get("message", ""), "information, not a failure", "info")
     if "misfit" in fit.attrs:  # skinfit.misfit; its warnings are issues through the rows above
         r = fit.attr("misfit")
         bad = any(c["warn"] for c in r["checks"]) or bool(r.get("pareto_k") and r["pareto_k"]["warn"])

@@ -51,10 +51,10 @@ def test_bound_pileup_threshold(post, share, flagged):
     with 6%) where the prior has ~0 mass; 5% of the draws is the threshold."""
     theta = _centre(post).reshape(-1, 4)
     theta[: int(share * len(theta)), 1] = 1.985
-    problems = guardrails.check_run(post, _run(post, theta.reshape(32, 50, 4)))
-    assert [p["check"] for p in problems] == (["bound"] if flagged else [])
-    if flagged:
-        assert problems[0]["parameter"] == "c_exp" and "upper bound 2" in problems[0]["message"]
+    found, notes = guardrails.assess_run(post, _run(post, theta.reshape(32, 50, 4)))
+    assert [p["check"] for p in found + notes] == (["bound"] if flagged else [])
+    if flagged:  # the data (c_exp 0.5 +- 0.2) do not ask for c_exp > 2: information, not a failure
+        assert found == [] and notes[0]["parameter"] == "c_exp" and "upper bound 2" in notes[0]["message"]
 
 
 def test_bound_window_is_in_the_log_coordinate_for_positive_parameters(post):
@@ -68,11 +68,15 @@ def test_bound_window_is_in_the_log_coordinate_for_positive_parameters(post):
     assert edge == pytest.approx(0.2288, abs=1e-4)
     theta = _centre(post).reshape(-1, 4)
     theta[:200, 3] = np.exp(-0.2)
-    assert [p["parameter"] for p in guardrails.check_run(post, _run(post, theta.reshape(32, 50, 4)))] == ["sigma"]
+    def piled():
+        found, notes = guardrails.assess_run(post, _run(post, theta.reshape(32, 50, 4)))
+        return [p["parameter"] for p in found + notes]
+
+    assert piled() == ["sigma"]
     theta[:200, 3] = np.exp(-0.26)
-    assert guardrails.check_run(post, _run(post, theta.reshape(32, 50, 4))) == []
+    assert piled() == []
     theta[:200, 3] = 1e-6
-    assert guardrails.check_run(post, _run(post, theta.reshape(32, 50, 4))) == []
+    assert piled() == []
 
 
 def test_low_acceptance_walker_is_flagged(post):
@@ -99,19 +103,18 @@ def test_not_converged_is_a_failure(post):
 
 
 # ---- end to end: a prior whose hard bound cuts the posterior ------------------------------------
+E2E = "electroadhesion"  # the model that made the shipped data (no misfit in a clean fit)
+
+
 @pytest.fixture(scope="module")
 def bounded_priors(tmp_path_factory):
-    """The shipped priors with d (the linear friction coefficient, 0.41 +- 0.04 in these data)
-    capped at 0.3 by a prior falling towards the cap (normal(0, 0.3) on [0, 0.3]): the bound, not
-    the prior, piles the posterior up (measured over seeds 1-6: 12.5-15% of the posterior draws
-    within the window vs 4.9% of the prior's, a ratio of 2.5-3.0 against the rule's 2; the
-    shipped prior's own loc = 0.3 puts 7% of its mass there, which left ratios of 2.0-2.4)."""
-    text = (ROOT / "priors" / f"{MODEL}.toml").read_text()
-    text = text.replace('[d]\ndist = "normal"\nloc = 0.3\nscale = 0.3\nbounds = [0.0, 2.0]',
-                        '[d]\ndist = "normal"\nloc = 0.0\nscale = 0.3\nbounds = [0.0, 0.3]')
-    assert "bounds = [0.0, 0.3]" in text
-    path = tmp_path_factory.mktemp("priors") / f"{MODEL}.toml"
-    path.write_text(text)
+    """The shipped electroadhesion priors with the noise scale capped at 15 mN (the data were
+    simulated with 20 mN): the data ask for a larger sigma than the bound allows."""
+    text = (ROOT / "priors" / f"{E2E}.toml").read_text()
+    old = '[sigma]\ndist = "halfnormal"\nscale = 0.05\nbounds = [0.0, 1.0]'
+    assert old in text
+    path = tmp_path_factory.mktemp("priors") / f"{E2E}.toml"
+    path.write_text(text.replace(old, '[sigma]\ndist = "halfnormal"\nscale = 0.05\nbounds = [0.0, 0.015]'))
     return path
 
 
@@ -123,7 +126,7 @@ def runs(tmp_path_factory, bounded_priors):
         path = tmp_path_factory.mktemp(name)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            code = main(["fit", MODEL, DATA, "--out", str(path), "--seed", "4", "--quiet", "--strict", *extra])
+            code = main(["fit", E2E, DATA, "--out", str(path), "--seed", "4", "--quiet", "--strict", *extra])
         out[name] = (code, skinfit.load_fit(path))
     return out
 
@@ -137,16 +140,61 @@ def test_posterior_on_a_bound_is_warned_everywhere(runs):
     code, fit = runs["bounded"]
     assert code == 3  # --strict
     bound = [w for w in fit.warnings if w["check"] == "bound"]
-    assert [w["parameter"] for w in bound] == ["d"] and "upper bound 0.3" in bound[0]["message"]
+    assert [w["parameter"] for w in bound] == ["sigma"]
+    assert "the data ask for values beyond the prior's upper bound 0.015" in bound[0]["message"]
     assert json.loads(fit.idata.attrs["warnings"]) == fit.warnings  # in the saved file
-    assert "ON A BOUND: d:" in fit.summary().loc["d", "note"]
-    assert "WARN: d:" in fit.report_text()
+    assert "ON A BOUND: sigma:" in fit.summary().loc["sigma", "note"]
+    assert "WARN: sigma:" in fit.report_text()
     table, issues = fit_diagnostics(fit)
-    assert table.loc["guard rail: bound (d)", "status"] == "WARN"
-    assert any("upper bound 0.3" in message for _, message in issues)
+    assert table.loc["guard rail: bound (sigma)", "status"] == "WARN"
+    assert any("upper bound 0.015" in message for _, message in issues)
 
 
 def test_library_fit_warns(bounded_priors):
-    with pytest.warns(skinfit.ConvergenceWarning, match=r"d: \d+% of the posterior draws lie within 0.25 sd"):
-        skinfit.fit(MODEL, DATA, priors=skinfit.load_priors(bounded_priors), rng=4, max_steps=2000,
-                    n_global=300)
+    with pytest.warns(skinfit.ConvergenceWarning, match=r"sigma: the data ask for values beyond the prior's upper "
+                                                        r"bound 0.015: .*likelihood-ratio p = "):
+        skinfit.fit(E2E, DATA, priors=skinfit.load_priors(bounded_priors), rng=4, max_steps=2000, n_global=300)
+
+
+# ---- issue 39 point 4: warnings that cry wolf ---------------------------------------------------
+def _simulated_csv(path, seed):
+    """Data simulated from electroadhesion at its shipped design with parameters drawn from its
+    prior, drawn as skinfit.misfit.simulated_check draws them, written as a CSV with units in
+    its header; and the fit seed simulated_check uses."""
+    from skinfit.posterior import Posterior
+    from skinfit.sbc import _draw_truth, design_dataset
+
+    model = skinfit.load_model(E2E)
+    rng = np.random.default_rng(seed)
+    design = design_dataset(model)
+    post = Posterior(model, skinfit.load_priors(E2E), design)
+    truth = _draw_truth(post, rng)
+    y = post.simulate(truth[None], rng)["tangential_force"][0]
+    design.frame.assign(tangential_force=y).rename(columns={
+        "voltage": "voltage [V]", "normal_force": "normal_force [N]", "tangential_force": "tangential_force [N]"}
+    ).to_csv(path, index=False)
+    return int(rng.integers(2**63 - 1))
+
+
+def test_cry_wolf_prior_dominated_bound_is_a_note_not_a_warning(tmp_path, capsys):
+    """tau0's posterior leans on its prior's upper bound because the priors of beta0 and phi put
+    it there (the data determine only tau0*beta0 and tau0*phi), not because the data ask for
+    more: a note ('the data do not determine tau0 (prior-dominated)') that --strict does not
+    act on, shown in the text, summary and report.  Seed 39009 is the first of the seeds
+    39000-39099 of the issue's reproduction (15 of those 100 fits warned on the old code, tau0 in
+    13) whose fit warned about tau0."""
+    csv = tmp_path / "data.csv"
+    seed = _simulated_csv(csv, 39009)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        code = main(["fit", E2E, str(csv), "--out", str(tmp_path / "r"), "--seed", str(seed), "--strict"])
+    out = capsys.readouterr().out
+    fit = skinfit.load_fit(tmp_path / "r")
+    assert [w for w in fit.warnings if w["check"] == "bound"] == []
+    (note,) = [n for n in fit.notes if n["parameter"] == "tau0"]
+    assert note["message"].startswith("the data do not determine tau0 (prior-dominated)")
+    assert "upper bound 15000" in note["message"] and "likelihood-ratio p = " in note["message"]
+    assert code == (3 if fit.warnings else 0) and "NOTE: the data do not determine tau0" in out
+    assert "at a bound (note)" in fit.summary().loc["tau0", "note"]
+    table, issues = fit_diagnostics(fit)
+    assert table.loc["note: bound (tau0)", "status"] == "info" and not any("tau0" in m for _, m in issues)
