@@ -16,19 +16,18 @@ draws with A > B).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping
-    from .fit import Fit
-
 import itertools
+import os
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
 
 from .errors import InputError
-from .fit import _slot_values, as_generator
+from .fit import Fit, _slot_values, as_generator
+from .groups import load_groups
+from .population import subject_digest
+from .population_checks import check_prob, check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
 
@@ -89,10 +88,14 @@ def level_contrasts(fit: Fit, parameter: str, prob: float = 0.95) -> pd.DataFram
 
     Paired draws (same chain and draw).  Returns a table with one row per pair (A, B).
     """
+    check_prob(prob, "level_contrasts")
+    if not isinstance(fit, Fit):
+        raise InputError("level_contrasts", f"expected a Fit (got {type(fit).__name__})", field="fit")
     slots = [s["name"] for s in fit.attr("slots") if s["base"] == parameter and s["level"] is not None]
     if len(slots) < 2:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"parameter {parameter!r} is not split "
-                         "into levels in this fit (fit with split={parameter: column})", field="parameter")
+                         "into levels in this fit (fit with --split PARAMETER=COLUMN; Python: split={parameter: [column]})",
+                         field="parameter")
     return _table({s: draws(fit, s) for s in slots}, prob)
 
 
@@ -102,19 +105,35 @@ def fit_contrasts(fits: Mapping[str, Fit], parameter: str, rng: int | np.random.
 
     Parameters
     ----------
-    fits : mapping label -> Fit, or the folder of a ``fit --by`` run
+    fits : mapping label -> Fit, or the folder of a ``fit --by`` run (:func:`skinfit.load_groups`)
+        Distinct subjects of the data as they are now: the same fit under two labels, or fits
+        of a data file edited since, are an InputError.
     parameter : str
         A sampled slot name present in every fit.
     rng : int, None or numpy.random.Generator
         Used to resample every posterior to the shortest length before pairing by index.
     """
+    check_prob(prob, "fit_contrasts")
+    if not isinstance(rng, (int, np.integer, np.random.Generator)) or isinstance(rng, bool) or (
+            isinstance(rng, (int, np.integer)) and rng < 0):
+        if rng is not None:
+            raise InputError("fit_contrasts", f"expected a seed >= 0, None or a numpy Generator (got {rng!r})",
+                             field="rng")
+    if not isinstance(parameter, str):
+        raise InputError("fit_contrasts", f"expected a parameter name (got {parameter!r})", field="parameter")
     rng = as_generator(rng)
-    if not isinstance(fits, dict):
-        from .groups import load_groups
-
+    if isinstance(fits, (str, os.PathLike)):
         fits = load_groups(fits)
+    if not isinstance(fits, Mapping):
+        raise InputError("fit_contrasts", f"expected a mapping label -> Fit or a `fit --by` run folder (got "
+                         f"{type(fits).__name__})", field="fits")
+    bad = next((k for k, f in fits.items() if not isinstance(f, Fit)), None)
+    if bad is not None:
+        raise InputError("fit_contrasts", f"{bad}: a {type(fits[bad]).__name__}, not a Fit", field="fits")
     if len(fits) < 2:
         raise InputError("fit_contrasts", f"expected at least two fits (got {len(fits)})", field="fits")
+    # the same subject twice, or fits of a data file edited since: refused, as for a population
+    check_subjects(fits, {label: subject_digest(f) for label, f in fits.items()})
     values = {label: draws(f, parameter) for label, f in fits.items()}
     n = min(len(v) for v in values.values())
     return _table({label: rng.permutation(v)[:n] for label, v in values.items()}, prob)
