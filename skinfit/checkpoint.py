@@ -435,9 +435,9 @@ class CheckpointLock:
                 if self.shared:
                     raise InputError(self.path.parent, f"is being written by pid {holder or '?'} (lock "
                                      f"{self.lock_path.name}): wait for it to finish, then read it") from None
-                raise InputError(self.path.parent, ("is in use by pid " + holder if holder else
-                                                    "is in use by another skinfit process (reading it)")
-                                 + f" (lock {self.lock_path.name}); wait for it to finish or use another --out") from None
+                who = f"is in use by pid {holder}" if holder else "is in use by another skinfit process (reading it)"
+                raise InputError(self.path.parent, f"{who} (lock {self.lock_path.name}); wait for it to finish or "
+                                 "use another --out") from None
             # the holder before us may have unlinked the file after we opened it: lock the live one
             try:
                 same = os.stat(self.lock_path).st_ino == os.fstat(fd).st_ino

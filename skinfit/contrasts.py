@@ -94,8 +94,8 @@ def level_contrasts(fit: Fit, parameter: str, prob: float = 0.95) -> pd.DataFram
     slots = [s["name"] for s in fit.attr("slots") if s["base"] == parameter and s["level"] is not None]
     if len(slots) < 2:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"parameter {parameter!r} is not split "
-                         "into levels in this fit (fit with --split PARAMETER=COLUMN; Python: split={parameter: [column]})",
-                         field="parameter")
+                         "into levels in this fit (fit with --split PARAMETER=COLUMN; Python: "
+                         "split={parameter: [column]})", field="parameter")
     return _table({s: draws(fit, s) for s in slots}, prob)
 
 

@@ -39,7 +39,8 @@ from .fit import fit, load_fit, resolve_inputs
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
            "read_index", "index_document",
-           "record_source", "source_problem", "data_drift", "listed_problem", "reading", "index_drift"]
+           "record_source", "source_problem", "data_drift", "listed_problem", "reading", "index_drift",
+           "missing_groups"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -286,6 +287,22 @@ def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
     if message:
         warnings.warn(message, UserWarning, stacklevel=2)
     return fits
+
+
+def missing_groups(doc):
+    """The groups of a ``fit --by`` run's data (the card its index records) that its index does
+    not list, e.g. after a run was killed part-way: labels in the data's order.  Empty when the
+    data cannot be found or read (results moved to another machine, or changed: see
+    :func:`index_drift`)."""
+    card, by = doc.get("dataset_path"), doc.get("by")
+    if not (card and doc.get("dataset_is_file") and isinstance(by, list) and Path(card).exists()):
+        return []
+    try:
+        _, levels = group_labels(load_dataset(card), by)
+    except InputError:
+        return []
+    listed = {g.get("group") for g in doc.get("groups", []) if isinstance(g, dict)}
+    return [label for label in levels if label not in listed]
 
 
 def index_drift(index, doc, who="the fits"):

@@ -104,7 +104,7 @@ class _Subjects:
         # and the prior it replaces enter the proposals in z; and the prior of the population
         # slots in u (moments of 2000 prior quantiles), divided out there
         zbar = np.stack([m for m, _ in moments])
-        step = 1e-4 * np.sqrt(np.einsum("sii->si", covs))
+        step = np.maximum(1e-4 * np.sqrt(np.einsum("sii->si", covs)), 1e-8 * np.maximum(1.0, np.abs(zbar)))
         dz = np.eye(d)[:, None, :] * step[None]  # (d, S, d)
         plus, _ = self.transform(zbar[None] + dz)
         minus, _ = self.transform(zbar[None] - dz)

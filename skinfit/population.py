@@ -88,8 +88,9 @@ def load_run(path, model=None):
     one its index lists (its recorded group and data: :func:`skinfit.groups.listed_problem`),
     and a fit ``--by`` run's data file unchanged since (else an InputError naming the subject
     and what is wrong).  A campaign's fits of the model that are not complete (failed or
-    pending) are named in a :class:`PopulationWarning`."""
-    from .groups import index_document, index_drift, listed_problem, read_index, reading
+    pending), and groups of a ``--by`` run's data its index does not list, are named in a
+    :class:`PopulationWarning`."""
+    from .groups import index_document, index_drift, listed_problem, missing_groups, read_index, reading
 
     path = Path(path)
     if path.is_dir() and not (path / "index.json").exists() and (path / "fit.nc").exists():
@@ -121,6 +122,12 @@ def load_run(path, model=None):
         drift = index_drift(index, doc, f"the fits of {names}") if kind == "by" else None
     if drift:
         raise InputError(index, drift[len(f"{index}: "):] + " (they are stale)")
+    if kind == "by" and (missing := missing_groups(doc)):  # e.g. a `fit --by` killed part-way
+        shown = [_label({"group": g}, False) for g in missing]
+        warnings.warn(f"the run's data hold {len(missing)} group(s) its index does not list "
+                      f"({', '.join(shown[:5])}{' ...' if len(shown) > 5 else ''}: a `skinfit fit --by` that did not "
+                      f"finish?): the population is of the other {len(fits)} subjects only", PopulationWarning,
+                      stacklevel=2)
     if kind == "campaign":
         chosen = model or rows[0].get("model")
         missing = [f"{_label(r, len(datasets) > 1)} ({r.get('status')})" for r in doc
@@ -659,11 +666,23 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     Returns
     -------
     PopulationResult
+        Its ``warnings`` (also warned as :class:`PopulationWarning`) and ``problems`` (those
+        that mean it cannot be reported as it stands): a hyper-posterior that did not converge
+        is said with the population parameters the data cannot determine, why, and the options
+        that would help (:func:`skinfit.population_checks.not_converged`).
+
+    Raises
+    ------
+    InputError
+        Before any sampling, for a bad argument (:func:`skinfit.population_checks.check_arguments`),
+        fits that are not distinct subjects of the data as they are now (a fit filed under
+        another subject, one fit under two labels, a data file edited since:
+        :func:`skinfit.population_checks.check_subjects`), or a run being written.
     """
     parameters, family = check_arguments(parameters, family, correlated, method, rng, model, chains, ess_target,
                                          rhat_max, max_sweeps, burn, min_contraction, n_draws, max_steps, cache)
     if rng is None:  # a seed drawn here, recorded in the result's sampler record like a given one
-        rng = int(np.random.SeedSequence().entropy)
+        rng = int(np.random.SeedSequence().entropy % 2**63)  # as fit(): one --seed accepts
     seed, rng = rng, as_generator(rng)
     with warnings.catch_warnings(record=True) as read:  # a run's notes (a campaign's incomplete fits) are kept
         warnings.simplefilter("always", PopulationWarning)
@@ -705,8 +724,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         names = [x["name"] for x in fits[s].attr("slots")]
         if names != list(slots):
             raise InputError("population", f"subject {s} has other sampled parameters ({', '.join(names)}) than "
-                             f"{subjects[0]} ({', '.join(slots)}): fit all subjects with the same --split (Python: split=)",
-                             field="fits")
+                             f"{subjects[0]} ({', '.join(slots)}): fit all subjects with the same --split "
+                             "(Python: split=)", field="fits")
     hyper, centre, scale = {}, [], []
     for name, fam, lg in zip(parameters, fams, logs):
         prior = priors[slots[name]["base"]]
@@ -973,7 +992,8 @@ def _parse_family(items):
         if not sep or not fam or not name:
             raise InputError("--family", f"expected PARAMETER=FAMILY (got {item!r}; families: {', '.join(FAMILIES)})")
         if name in out:
-            raise InputError("--family", f"{name} given twice ({name}={out[name]} and {item}): give each parameter once")
+            raise InputError("--family", f"{name} given twice ({name}={out[name]} and {item}): give each parameter "
+                                         "once")
         out[name] = fam
     return out
 

@@ -33,7 +33,6 @@ FAMILIES = ("normal", "lognormal", "student_t")
 #: the largest set of draws a population may hold while sampling (chains x 2000 kept sweeps x
 #: subjects' vectors), refused above with the estimate
 MAX_DRAW_BYTES = 4 * 2**30
-_SEED_MAX = 2**63 - 1
 
 
 def _int(value, name, lo, hi=None):
@@ -98,8 +97,8 @@ def check_arguments(parameters, family, correlated, method, rng, model, chains, 
     if method not in ("gibbs", "reweight"):
         raise InputError("population", f"unknown method {method!r} (expected gibbs or reweight)", field="method")
     if not (rng is None or isinstance(rng, np.random.Generator)):
-        if isinstance(rng, bool) or not isinstance(rng, numbers.Integral) or not 0 <= rng <= _SEED_MAX:
-            raise InputError("population", f"expected a seed, an integer 0 .. 2**63-1, None or a numpy Generator "
+        if isinstance(rng, bool) or not isinstance(rng, numbers.Integral) or rng < 0:
+            raise InputError("population", f"expected a seed (an integer >= 0), None or a numpy Generator "
                              f"(got {rng!r})", field="rng")
     if model is not None and (not isinstance(model, str) or not model):
         raise InputError("population", f"expected a model id (got {model!r})", field="model")
@@ -229,11 +228,15 @@ def not_converged(result, targets, min_contraction, seconds):
             advice.append(f"--params {','.join(rest)} (Python: parameters={rest!r}), with which {', '.join(names)} "
                           f"keep{'s' if one else ''} {'its' if one else 'their'} prior per subject")
     if "sweeps" in result.sampler:
+        # the ESS grows about in proportion to the sweeps, R-hat - 1 shrinks about in inverse proportion
         sweeps = int(result.sampler["sweeps"])
         grown = max(float(ess.min()), 1.0)
-        need = _round_up(sweeps * 1.25 * ess_target / grown) if grown < ess_target else _round_up(2 * sweeps)
-        advice.append(f"--max-sweeps {need} (Python: max_sweeps={need}; from the rate the ESS grew, about "
-                      f"{seconds * need / max(sweeps, 1) / 60:.0f} min at this run's pace)")
+        rhat = float(diag["r_hat"].max()) if diag["r_hat"].notna().any() else 1.0
+        need = max(ess_target / grown if grown < ess_target else 1.0,
+                   (rhat - 1) / (rhat_max - 1) if rhat > rhat_max else 1.0)
+        need = _round_up(sweeps * (1.25 * need if need > 1 else 2.0))
+        advice.append(f"--max-sweeps {need} (Python: max_sweeps={need}; from the rates the ESS and R-hat "
+                      f"improved, about {seconds * need / max(sweeps, 1) / 60:.0f} min at this run's pace)")
     else:
         advice.append("--method gibbs (Python: method='gibbs')")
     return text + ". Rerun with " + ", or with ".join(advice)

@@ -67,7 +67,8 @@ def _one_line_error(capsys, code):
 
 
 def _paths(run):
-    return {g["group"].split("=", 1)[1]: run / g["path"] for g in json.loads((run / "index.json").read_text())["groups"]}
+    groups = json.loads((run / "index.json").read_text())["groups"]
+    return {g["group"].split("=", 1)[1]: run / g["path"] for g in groups}
 
 
 # ---- wrong or stale inputs ----------------------------------------------------------------
@@ -141,6 +142,21 @@ def test_class_wrong_inputs_a_campaigns_incomplete_fits_are_named_and_strict_exi
     captured = capsys.readouterr()
     assert code == 3 and "WARNING: the campaign lists 1 fit(s)" in captured.out
     assert load_population(tmp_path / "pop" / "population.nc").subjects == ["S01", "S02", "S03"]  # kept
+
+
+def test_class_wrong_inputs_groups_of_the_data_a_by_run_does_not_list_are_named(copy, capsys):
+    """A `fit --by` killed after two of three subjects leaves an index of two: the population of
+    those two says so (it is not the population of the data), and --strict exits 3."""
+    run, _ = copy
+    index = json.loads((run / "index.json").read_text())
+    index["groups"] = index["groups"][:2]
+    (run / "index.json").write_text(json.dumps(index))
+    with pytest.warns(PopulationWarning, match=r"the run's data hold 1 group\(s\) its index does not list \(S03: "
+                                                r"a `skinfit fit --by` that did not finish\?\): the population is of "
+                                                r"the other 2 subjects only"):
+        assert list(load_run(run)) == ["S01", "S02"]
+    code = main(["population", str(run), "--params", "mu", "--seed", "1", "--strict", "--out", str(run / "pop")])
+    assert code == 3 and "WARNING: the run's data hold 1 group(s)" in capsys.readouterr().out
 
 
 def test_class_wrong_inputs_a_single_fits_folder_or_no_run_is_a_one_line_error(run3, tmp_path, capsys):
