@@ -100,6 +100,8 @@ def load_run(path, model=None):
     with reading(index.parent):
         rows, _ = read_index(index)
         kind, doc = index_document(index)
+        if not rows:
+            raise InputError(index, "lists no completed fit: nothing to pool")
         models = sorted({str(r.get("model")) for r in rows})
         if model is None and len(models) > 1:
             raise InputError(index, f"fits of several models ({', '.join(models)}): choose one with --model "
@@ -164,8 +166,8 @@ def _load_light(path):
     try:
         with h5netcdf.File(path, "r") as h:
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
-            if "model_id" not in attrs or "posterior" not in h.groups:
-                raise InputError(path, "not a skinfit fit (no model_id attribute or posterior group)")
+            if "model_id" not in attrs or "slots" not in attrs or "posterior" not in h.groups:
+                raise InputError(path, "not a skinfit fit (no model_id or slots attribute, or no posterior group)")
             groups = {}
             for g in ("posterior", "observed_data", "constant_data"):
                 if g in h.groups:

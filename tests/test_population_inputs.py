@@ -172,6 +172,26 @@ def test_class_wrong_inputs_a_single_fits_folder_or_no_run_is_a_one_line_error(r
     assert not (tmp_path / "p").exists()
 
 
+@pytest.mark.parametrize("damage, expected", [
+    ("truncate", "not a readable skinfit result"),
+    ("item", "row 1: expected a 'path' for each fit"),
+    ("empty", "lists no completed fit: nothing to pool"),
+])
+def test_class_wrong_inputs_a_damaged_run_is_a_one_line_error(copy, capsys, damage, expected):
+    run, _ = copy
+    index = json.loads((run / "index.json").read_text())
+    if damage == "truncate":
+        fit = run / index["groups"][0]["path"]
+        fit.write_bytes(fit.read_bytes()[:5000])
+    elif damage == "item":
+        index["groups"][0] = "subject=S01"
+        (run / "index.json").write_text(json.dumps(index))
+    else:
+        (run / "index.json").write_text("[]")  # a campaign that has completed nothing
+    line = _one_line_error(capsys, main(["population", str(run), "--out", str(run.parent / "p")]))
+    assert expected in line
+
+
 def test_class_concurrent_writers_a_run_being_written_is_not_read(run3, capsys):
     """`fit --by` rewrites index.json group by group: a population reading it meanwhile would see
     only the groups done so far. The population takes the reader's side of the writer's lock."""
