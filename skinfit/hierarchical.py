@@ -38,8 +38,8 @@ hyper-parameters ``mu``, ``Sigma`` of the population parameters in their populat
    crosses the funnel between the hyper-parameters and the subjects when their data are
    weak (few presses, a slope with a condition), where the centred Gibbs updates alone move
    ``mu`` and ``sd`` slowly.  Checked against quadrature (tests/test_population.py).  Used
-   where the other slots' natural values depend on their own ``z`` alone (no product or
-   shear coordinate ties them to a population slot), which the moves hold fixed.
+   where the other slots' natural values do not depend on the population slots (no product
+   or shear coordinate ties them to one): the moves hold them fixed in ``z``.
 
 The population density is not renormalised inside a parameter's prior bounds (which stay
 hard): exact when the population puts negligible mass outside them.
@@ -115,10 +115,9 @@ class _Subjects:
             u0 = np.where(spec.log, np.log(tp), tp)
             self.J = np.where(spec.log, 1.0 / tp, 1.0)[:, :, None] * dtheta[:, spec.index, :]  # (S, p, d)
         self.r0 = u0 - np.einsum("spd,sd->sp", self.J, zbar)
-        #: the other slots' natural values depend on their own z only (no product or shear with a
-        #: population slot): the location and scale moves hold them fixed in z
-        self.separable = bool(all(np.count_nonzero(dtheta[:, j, :]) == np.count_nonzero(dtheta[:, j, j])
-                                  for j in self.rest))
+        #: the other slots' natural values do not depend on the population slots' z (no product or
+        #: shear ties them to a population slot): the location and scale moves hold them fixed in z
+        self.separable = not np.any(dtheta[:, self.rest][:, :, spec.index])
         u = (np.arange(2000) + 0.5) / 2000
         pm, pv = np.empty((self.S, spec.p)), np.empty((self.S, spec.p))
         for i, post in enumerate(posts):

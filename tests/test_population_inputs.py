@@ -434,5 +434,15 @@ def test_class_non_convergence_the_proposal_maps_the_population_through_product_
                                                        / theta[names.index("d_air")], rel=1e-5)
     # phi: u = z_phi + offset(d_air): unit slope in z_phi, a cross term in d_air
     assert J[4, names.index("phi")] == pytest.approx(1.0, rel=1e-6) and J[4, names.index("d_air")] != 0
-    # the noise scale, the only slot outside the population, depends on its own z alone
+    # the location and scale moves hold the other slots fixed in z: valid while none of them
+    # depends on a population slot (the noise scale; beta0 with tau0 outside; not tau0 with
+    # beta0 outside, whose natural value is X / (tau0 E_star^(-2/3)))
     assert subs.separable
+
+    def separable(names_in):
+        idx = [names.index(n) for n in names_in]
+        k = len(idx)
+        return _Subjects([post], [(z.mean(axis=0), np.cov(z.T))],
+                         Spec(idx, [True] * k, [False] * k, np.zeros(k), np.ones(k), False)).separable
+
+    assert separable(["beta0"]) and not separable(["tau0"]) and not separable(["d_air"])
