@@ -395,13 +395,18 @@ class CheckpointLock:
     Uses ``fcntl.flock`` on ``.<name>.lock`` beside ``path`` (released by the kernel if the
     process dies), with the holder's pid written into it; a second process gets the one-line
     InputError ``OUT is in use by pid N`` (it does not wait).  ``skinfit fit --out``,
-    ``skinfit fit --by`` and campaigns take it on their output folder.  Where ``fcntl`` is
-    unavailable the lock is a no-op.
+    ``skinfit fit --by``, ``skinfit population`` and campaigns take it on their output folder.
+    ``shared=True`` is a reader's lock on the same file (``skinfit population`` and
+    :func:`skinfit.load_groups` reading a run): any number of readers at once, none while a
+    writer holds it, and no writer while one reads.  A folder where the lock file cannot be
+    created (read-only) and does not exist has no writer: a reader proceeds without it.
+    Where ``fcntl`` is unavailable the lock is a no-op.
     """
 
-    def __init__(self, path):
+    def __init__(self, path, *, shared=False):
         self.path = Path(path)
         self.lock_path = self.path.with_name(f".{self.path.name}.lock")
+        self.shared = bool(shared)
         self._fd = None
 
     def __enter__(self):
@@ -409,18 +414,30 @@ class CheckpointLock:
             import fcntl
         except ImportError:  # pragma: no cover - not POSIX
             return self
-        self.lock_path.parent.mkdir(parents=True, exist_ok=True)
+        if not self.shared:
+            self.lock_path.parent.mkdir(parents=True, exist_ok=True)
+        tries = 0
         while True:
-            fd = os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = self._open()
+            if fd is None:  # a reader of a folder it cannot write, with no lock file: no writer there
+                return self
             try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, (fcntl.LOCK_SH if self.shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
             except OSError:
                 try:
-                    holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+                    holder = os.read(fd, 32).decode(errors="replace").strip()
                 finally:
                     os.close(fd)
-                raise InputError(self.path.parent, f"is in use by pid {holder} (lock {self.lock_path.name}); "
-                                 "wait for it to finish or use another --out") from None
+                tries += 1
+                if not holder and tries < 40:  # a reader leaving (it locks to tidy up) or a writer starting
+                    time.sleep(0.025)
+                    continue
+                if self.shared:
+                    raise InputError(self.path.parent, f"is being written by pid {holder or '?'} (lock "
+                                     f"{self.lock_path.name}): wait for it to finish, then read it") from None
+                who = f"is in use by pid {holder}" if holder else "is in use by another skinfit process (reading it)"
+                raise InputError(self.path.parent, f"{who} (lock {self.lock_path.name}); wait for it to finish or "
+                                 "use another --out") from None
             # the holder before us may have unlinked the file after we opened it: lock the live one
             try:
                 same = os.stat(self.lock_path).st_ino == os.fstat(fd).st_ino
@@ -429,9 +446,11 @@ class CheckpointLock:
             if same:
                 break
             os.close(fd)
+        self._fd = fd
+        if self.shared:  # a reader neither names itself nor tidies the writer's folder
+            return self
         os.ftruncate(fd, 0)
         os.write(fd, str(os.getpid()).encode())
-        self._fd = fd
         for stale in self.path.parent.glob(f".{self.path.name}.*.tmp"):  # left by a killed writer
             m = _TEMP.match(stale.name)
             if m and m["name"] == self.path.name:  # a temp file of ours (temp_file), never a file of like name
@@ -439,11 +458,34 @@ class CheckpointLock:
         remove_stale_temps(self.path.parent, recursive=False)
         return self
 
+    def _open(self):
+        """A descriptor of the lock file (created unless this is a reader that cannot), or None."""
+        try:
+            return os.open(self.lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            if not self.shared:
+                raise
+        try:
+            return os.open(self.lock_path, os.O_RDONLY)
+        except FileNotFoundError:
+            return None
+
     def __exit__(self, *exc):
-        if self._fd is not None:
+        if self._fd is None:
+            return False
+        if self.shared:  # the last reader removes the file it may have created
+            import fcntl
+
+            try:
+                fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                if os.stat(self.lock_path).st_ino == os.fstat(self._fd).st_ino:
+                    self.lock_path.unlink()
+            except OSError:  # another reader or a writer holds it now, or it is gone
+                pass
+        else:
             self.lock_path.unlink(missing_ok=True)
-            os.close(self._fd)
-            self._fd = None
+        os.close(self._fd)
+        self._fd = None
         return False
 
 

@@ -368,9 +368,12 @@ def build_parser():
     s.add_argument("--correlated", action="store_true", help="correlated (multivariate normal) population")
     s.add_argument("--method", default="gibbs", choices=["gibbs", "reweight"], help="sampler (default gibbs)")
     s.add_argument("--model", help="the model to use from a campaign with several")
-    s.add_argument("--seed", type=_SEED, default=None)
+    s.add_argument("--seed", type=_SEED, default=None, help="seed: the same seed gives identical draws")
+    s.add_argument("--max-sweeps", type=_COUNT, default=20000,
+                   help="Gibbs sweeps at most before stopping unconverged (default 20000)")
     s.add_argument("--out", help="output directory (default RUN/population)")
     s.add_argument("--overwrite", action="store_true", help="replace a population already in --out")
+    s.add_argument("--strict", action="store_true", help="exit 3 if not converged or the sampler warned")
     s.set_defaults(func=_lazy("skinfit.population", "cli_population"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")

@@ -16,11 +16,6 @@ draws with A > B).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from .fit import Fit
-
 import itertools
 from collections.abc import Mapping
 
@@ -29,7 +24,10 @@ import pandas as pd
 
 from .arguments import check_number, shown
 from .errors import InputError, InputTypeError
-from .fit import _slot_values, as_fit, as_generator
+from .fit import Fit, _slot_values, as_fit, as_generator
+from .groups import load_groups
+from .population import subject_digest
+from .population_checks import check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
 
@@ -102,7 +100,8 @@ def level_contrasts(fit: Fit, parameter: str, prob: float = 0.95) -> pd.DataFram
     slots = [s["name"] for s in fit.attr("slots") if s["base"] == parameter and s["level"] is not None]
     if len(slots) < 2:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"parameter {parameter!r} is not split "
-                         "into levels in this fit (fit with split={parameter: column})", field="parameter")
+                         "into levels in this fit (fit with --split PARAMETER=COLUMN; Python: "
+                         "split={parameter: [column]})", field="parameter")
     return _table({s: draws(fit, s) for s in slots}, prob)
 
 
@@ -112,22 +111,31 @@ def fit_contrasts(fits: Mapping[str, Fit], parameter: str, rng: int | np.random.
 
     Parameters
     ----------
-    fits : mapping label -> Fit, or the folder of a ``fit --by`` run
+    fits : mapping label -> Fit, or the folder of a ``fit --by`` run (:func:`skinfit.load_groups`)
+        Distinct subjects of the data as they are now: the same fit under two labels, or fits
+        of a data file edited since, are an InputError.
     parameter : str
         A sampled slot name present in every fit.
     rng : int, None or numpy.random.Generator
         Used to resample every posterior to the shortest length before pairing by index.
     """
+    if not isinstance(rng, (int, np.integer, np.random.Generator)) or isinstance(rng, bool) or (
+            isinstance(rng, (int, np.integer)) and rng < 0):
+        if rng is not None:
+            raise InputError("fit_contrasts", f"expected a seed >= 0, None or a numpy Generator (got {rng!r})",
+                             field="rng")
+    if not isinstance(parameter, str):
+        raise InputError("fit_contrasts", f"expected a parameter name (got {parameter!r})", field="parameter")
     rng = as_generator(rng)
     _check_parameter(parameter, prob, "fit_contrasts")
     if not isinstance(fits, Mapping):
-        from .groups import load_groups
-
         fits = load_groups(fits)
     fits = {label: f if callable(getattr(f, "attr", None)) and callable(getattr(f, "group", None))  # a Fit or
             else as_fit(f, "fit_contrasts", f"fits[{label!r}]") for label, f in fits.items()}  # population.DrawsFit
     if len(fits) < 2:
         raise InputError("fit_contrasts", f"expected at least two fits (got {len(fits)})", field="fits")
+    # the same subject twice, or fits of a data file edited since: refused, as for a population
+    check_subjects(fits, {label: subject_digest(f) for label, f in fits.items()})
     values = {label: draws(f, parameter) for label, f in fits.items()}
     n = min(len(v) for v in values.values())
     return _table({label: rng.permutation(v)[:n] for label, v in values.items()}, prob)

@@ -29,6 +29,7 @@ import os
 import re
 import time
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,8 @@ from .provenance import input_lines, input_record
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
            "read_index", "index_document", "read_inputs",
-           "record_source", "source_problem", "data_drift"]
+           "record_source", "source_problem", "data_drift", "listed_problem", "reading", "index_drift",
+           "missing_groups"]
 
 #: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -141,6 +143,29 @@ def source_problem(attrs, label, sha256):
             return f"holds the fit of group {attrs.get('group')!r}, not {label!r}"
         return None
     return "records no data hash (written by an older skinfit)"
+
+
+def listed_problem(attrs, label, sha256):
+    """Why a saved fit (its root ``attrs``) listed in a run's index for group ``label`` of the
+    data with ``sha256`` (None where the index records none) is not that fit, or None."""
+    if sha256 is not None:
+        return source_problem(attrs, label, sha256)
+    if attrs.get("group", label) != label:  # an index written before the data hash was
+        return f"holds the fit of group {attrs.get('group')!r}, not {label!r}"
+    return None
+
+
+@contextmanager
+def reading(folder):
+    """Read a run folder (a ``fit --by`` run or a campaign's out) while no writer holds it:
+    the reader's side of the lock its writer takes (:class:`~skinfit.checkpoint.CheckpointLock`
+    ``shared=True`` on ``checkpoint.h5`` and ``campaign``).  A run being written (its index
+    listing only the groups done so far) is an InputError naming the writer's pid."""
+    from .checkpoint import CheckpointLock
+
+    folder = Path(folder)
+    with CheckpointLock(folder / "checkpoint.h5", shared=True), CheckpointLock(folder / "campaign", shared=True):
+        yield
 
 
 def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, noise=None,
@@ -264,14 +289,17 @@ def read_index(path):
     those with status done or complete). ``path``: the index or its folder.
 
     Returns ``(rows, skipped)``: each row a dict with ``model``, ``dataset``, ``group`` (None
-    for a whole dataset) and ``path`` (a relative path read from the index's folder; the file
-    must exist), and the number of campaign rows not complete (failed or pending)."""
+    for a whole dataset), ``path`` (a relative path read from the index's folder; the file
+    must exist) and ``dataset_sha256`` (the data the index says it was fitted to; None where
+    it records none), and the number of rows not complete (campaign rows failed or pending,
+    or groups of a ``fit --by`` run whose fit failed)."""
     path = Path(check_path(path, "index", None, "a run directory or its index.json"))
     index = path / "index.json" if path.is_dir() else path
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json of `skinfit fit --by` or of a campaign)")
     kind, doc = index_document(index)
     failed = 0
+    header_sha256 = doc.get("dataset_sha256") if kind == "by" else None
     if kind == "campaign":
         listed = [r for r in doc if not isinstance(r, dict) or r.get("status", "done") in ("done", "complete")]
     elif isinstance(doc.get("groups"), list):
@@ -288,7 +316,7 @@ def read_index(path):
         if not fit_path.is_file():
             raise InputError(index, f"lists {r['path']}, which does not exist", row=i)
         rows.append({"model": r.get("model"), "dataset": r.get("dataset"), "group": r.get("group"),
-                     "path": fit_path})
+                     "path": fit_path, "dataset_sha256": r.get("dataset_sha256", header_sha256)})
     return rows, (len(doc) - len(listed) if isinstance(doc, list) else failed)
 
 
@@ -302,43 +330,72 @@ def load_groups(path: str | os.PathLike) -> dict[str, Fit]:
     """
     path = Path(check_path(path, "load_groups", None, "the run directory of `skinfit fit --by` or its index.json"))
     index = path / "index.json" if path.is_dir() else path
+    with reading(index.parent):
+        fits, doc = _load_listed(index)
+    failed = [f.get("group") for f in doc.get("failed") or [] if isinstance(f, dict)]
+    if failed:
+        warnings.warn(f"{index}: the fits of {len(failed)} group(s) failed and are left out "
+                      f"({', '.join(map(str, failed))}): see their errors there", UserWarning, stacklevel=2)
+    message = index_drift(index, doc)
+    if message:
+        warnings.warn(message, UserWarning, stacklevel=2)
+    return fits
+
+
+def missing_groups(doc):
+    """The groups of a ``fit --by`` run's data (the card its index records) that its index does
+    not list, e.g. after a run was killed part-way: labels in the data's order.  Empty when the
+    data cannot be found or read (results moved to another machine, or changed: see
+    :func:`index_drift`)."""
+    card, by = doc.get("dataset_path"), doc.get("by")
+    if not (card and doc.get("dataset_is_file") and isinstance(by, list) and Path(card).exists()):
+        return []
+    try:
+        _, levels = group_labels(load_dataset(card), by)
+    except InputError:
+        return []
+    listed = {g.get("group") for g in doc.get("groups", []) if isinstance(g, dict)}
+    return [label for label in levels if label not in listed]
+
+
+def index_drift(index, doc, who="the fits"):
+    """Why the fits of a ``fit --by`` run (its ``index`` path and document) are not of the data
+    file now at the card the index records (its sha256 differs), or None (the same, or the
+    card not found: results may be moved to another machine).  ``who`` names the fits."""
+    card, recorded = doc.get("dataset_path"), doc.get("dataset_sha256")
+    if not (card and recorded and doc.get("dataset_is_file") and Path(card).exists()):
+        return None
+    try:
+        now = load_dataset(card).sha256
+    except InputError as exc:
+        now = f"unreadable ({exc})"
+    if now == recorded:
+        return None
+    return (f"{index}: {who} were made from {card} with sha256 {recorded[:12]}.., which now has {now[:12]}..: "
+            "fit again to use the current data")
+
+
+def _load_listed(index):
+    """The fits of a ``fit --by`` run's index, each checked to be the fit it is listed as."""
     if not index.exists():
         raise InputError(index, "no such index (expected the index.json written by `skinfit fit --by`)")
     kind, doc = index_document(index)
     if kind != "by" or not isinstance(doc.get("groups"), list):
         raise InputError(index, "not the index.json of `skinfit fit --by` (with 'groups')")
     fits = {}
-    for g in doc["groups"]:
+    for i, g in enumerate(doc["groups"], start=1):
+        if not isinstance(g, dict) or not isinstance(g.get("group"), str) or not isinstance(g.get("path"), str):
+            raise InputError(index, "expected a 'group' and a 'path' for each group", row=i)
         label = g["group"]
         if label in fits:
             raise InputError(index, f"group {label!r} is listed twice")
         fit_path = inside(index.parent, index.parent / g["path"])
         result = load_fit(fit_path)
-        sha256 = doc.get("dataset_sha256")
-        if sha256 is not None:
-            problem = source_problem(result.attrs, label, sha256)
-        elif result.attrs.get("group", label) != label:  # an index written before the data hash was
-            problem = f"holds the fit of group {result.attrs.get('group')!r}, not {label!r}"
-        else:
-            problem = None
+        problem = listed_problem(result.attrs, label, doc.get("dataset_sha256"))
         if problem:
             raise InputError(fit_path, f"listed for group {label!r} in {index} but {problem}")
         fits[label] = result
-    failed = [f.get("group") for f in doc.get("failed") or [] if isinstance(f, dict)]
-    if failed:
-        warnings.warn(f"{index}: the fits of {len(failed)} group(s) failed and are left out "
-                      f"({', '.join(map(str, failed))}): see their errors there", UserWarning, stacklevel=2)
-    card = doc.get("dataset_path")
-    if card and doc.get("dataset_is_file") and Path(card).exists():
-        try:
-            now = load_dataset(card).sha256
-        except InputError as exc:
-            now = f"unreadable ({exc})"
-        if now != doc["dataset_sha256"]:
-            warnings.warn(f"{index}: the fits were made from {card} with sha256 {doc['dataset_sha256'][:12]}.., "
-                          f"which now has {now[:12]}..: fit again to use the current data", UserWarning,
-                          stacklevel=2)
-    return fits
+    return fits, doc
 
 
 def data_drift(fits):

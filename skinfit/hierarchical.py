@@ -17,7 +17,8 @@ hyper-parameters ``mu``, ``Sigma`` of the population parameters in their populat
    Metropolis-Hastings from a multivariate t (5 d.o.f.) whose precision and location are the
    Gaussian approximation of the subject's separate fit (mean, covariance of its draws), with
    the prior of the population parameters divided out and the current population multiplied
-   in (information form; a delta-method step where ``u`` and ``z`` differ).  The proposal
+   in (information form; both in ``u`` linearised in ``z`` at the separate fit's mean, where
+   product, shift or shear coordinates mix slots or ``u`` and ``z`` differ).  The proposal
    depends on the hyper-parameters only, so it is a valid Gibbs-block proposal; the exact
    target (likelihood x population density x the prior of the other parameters x Jacobian)
    enters through the acceptance ratio.
@@ -36,7 +37,9 @@ hyper-parameters ``mu``, ``Sigma`` of the population parameters in their populat
    likelihood call for all subjects; one per weakly informed parameter and sweep.  It
    crosses the funnel between the hyper-parameters and the subjects when their data are
    weak (few presses, a slope with a condition), where the centred Gibbs updates alone move
-   ``mu`` and ``sd`` slowly.  Checked against quadrature (tests/test_population.py).
+   ``mu`` and ``sd`` slowly.  Checked against quadrature (tests/test_population.py).  Used
+   where the other slots' natural values do not depend on the population slots (no product
+   or shear coordinate ties them to one): the moves hold them fixed in ``z``.
 
 The population density is not renormalised inside a parameter's prior bounds (which stay
 hard): exact when the population puts negligible mass outside them.
@@ -46,6 +49,7 @@ import math
 
 import numpy as np
 
+from .errors import InputError
 from .posterior import standardised_squares
 from .priors import _LOGPDF
 
@@ -92,14 +96,32 @@ class _Subjects:
         self.hi = np.array([s.hi for s in first.slots])
         pop = set(spec.index.tolist())
         self.rest = [j for j in range(d) if j not in pop]
-        self.zlog = np.array([first.slots[j].transform in ("log", "shift_log") for j in spec.index])
         # one transform for all subjects when their sampling maps are the same (same constants)
         self.shared_map = all(p.constants == first.constants and p.names == first.names for p in posts)
-        # prior of the population slots in z coordinates (moments of 2000 prior quantiles)
+        # the population coordinates u of the population slots as a linear function of z at each
+        # separate fit's mean, u ~ r0 + J z (a Jacobian by central differences through the
+        # sampling map: product, shift and shear coordinates mix slots), so that the population
+        # and the prior it replaces enter the proposals in z; and the prior of the population
+        # slots in u (moments of 2000 prior quantiles), divided out there
+        zbar = np.stack([m for m, _ in moments])
+        step = np.maximum(1e-4 * np.sqrt(np.einsum("sii->si", covs)), 1e-8 * np.maximum(1.0, np.abs(zbar)))
+        dz = np.eye(d)[:, None, :] * step[None]  # (d, S, d)
+        plus, _ = self.transform(zbar[None] + dz)
+        minus, _ = self.transform(zbar[None] - dz)
+        dtheta = np.moveaxis((plus - minus) / (2 * step.T[:, :, None]), 0, -1)  # (S, d, d): d theta_i / d z_k
+        theta0, _ = self.transform(zbar)
+        tp = theta0[:, spec.index]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u0 = np.where(spec.log, np.log(tp), tp)
+            self.J = np.where(spec.log, 1.0 / tp, 1.0)[:, :, None] * dtheta[:, spec.index, :]  # (S, p, d)
+        self.r0 = u0 - np.einsum("spd,sd->sp", self.J, zbar)
+        #: the other slots' natural values do not depend on the population slots' z (no product or
+        #: shear ties them to a population slot): the location and scale moves hold them fixed in z
+        self.separable = not np.any(dtheta[:, self.rest][:, :, spec.index])
         u = (np.arange(2000) + 0.5) / 2000
         pm, pv = np.empty((self.S, spec.p)), np.empty((self.S, spec.p))
         for i, post in enumerate(posts):
-            for k, (j, lg) in enumerate(zip(spec.index, self.zlog)):
+            for k, (j, lg) in enumerate(zip(spec.index, spec.log)):
                 q = post.slots[j].prior.ppf(u)
                 q = np.log(q) if lg else q
                 pm[i, k], pv[i, k] = q.mean(), q.var()
@@ -248,39 +270,18 @@ class _Stacked:
         return np.where(np.logical_and.reduceat(ok, self.starts, axis=1), ll, -np.inf)
 
 
-def _pop_in_z(subs, mu, prec, spec):
-    """The population of the population slots in the subjects' z coordinates (delta method
-    where they differ from u): location (C, p) and precision (C, S, p, p)."""
-    mz = mu.copy()
-    scale = np.ones_like(mu)  # du/dz
-    to_log = subs.zlog & ~spec.log  # u = theta, z = log theta: u ~ e^z
-    to_lin = ~subs.zlog & spec.log  # u = log theta, z = theta
-    if to_log.any():
-        m = mu[:, to_log]
-        ok = m > 0
-        mz[:, to_log] = np.log(np.where(ok, m, 1.0))
-        scale[:, to_log] = np.where(ok, m, 0.0)
-    if to_lin.any():
-        e = np.exp(np.clip(mu[:, to_lin], -700, 700))
-        mz[:, to_lin] = e
-        scale[:, to_lin] = 1.0 / e
-    return mz, prec * scale[:, None, :, None] * scale[:, None, None, :]
-
-
 def _proposal(subs, mu, prec, spec):
     """Location (C, S, d) and Cholesky factor (C, S, d, d) of the precision of the independence
     proposals: the separate fit's Gaussian, its own prior of the population slots divided out
-    (where that leaves a positive-definite precision) and the population multiplied in."""
-    mz, prec_z = _pop_in_z(subs, mu, prec, spec)
-    idx = spec.index
+    (where that leaves a positive-definite precision) and the population multiplied in, both
+    in u linearised in z at the fit's mean (``u ~ r0 + J z``: :class:`_Subjects`)."""
+    J, r0 = subs.J, subs.r0
     C, S, d = len(mu), subs.S, subs.d
-    Q = np.broadcast_to(subs.A, (C, S, d, d)).copy()
-    h = np.broadcast_to(subs.b, (C, S, d)).copy()
-    Q[:, :, idx[:, None], idx[None, :]] += prec_z
-    h[:, :, idx] += np.einsum("csij,cj->csi", prec_z, mz)
-    Qd, hd = Q.copy(), h.copy()
-    Qd[:, :, idx, idx] -= subs.prior_prec
-    hd[:, :, idx] -= subs.prior_prec * subs.prior_mean
+    JtP = np.einsum("spi,cspq->csiq", J, prec)  # (C, S, d, p)
+    Q = subs.A[None] + np.einsum("csiq,sqj->csij", JtP, J)
+    h = subs.b[None] + np.einsum("csiq,csq->csi", JtP, mu[:, None, :] - r0[None])
+    Qd = Q - np.einsum("spi,sp,spj->sij", J, subs.prior_prec, J)[None]
+    hd = h - np.einsum("spi,sp->si", J, subs.prior_prec * (subs.prior_mean - r0))[None]
     try:
         L = np.linalg.cholesky(Qd)
         Q, h = Qd, hd
@@ -348,7 +349,8 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     burn, check_every, max_sweeps : sweeps discarded, sweeps between convergence checks, cap
     ess_target, rhat_max : stop when every hyper-parameter has bulk and tail ESS >= ess_target
         and R-hat <= rhat_max
-    keep : draws kept per chain (the chains are thinned to at most this many)
+    keep : draws kept per chain (the chains are thinned to at most this many; at most 2 keep are
+        held while sampling, so memory does not grow with max_sweeps)
     shift_move : the location and scale moves (3. above) for weakly informed parameters
 
     Returns
@@ -358,6 +360,9 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     """
     import arviz as az
 
+    if not 0 <= burn < max_sweeps or chains < 2 or keep < 1:
+        raise InputError("run_gibbs", f"expected 0 <= burn < max_sweeps, chains >= 2 and keep >= 1 (got burn {burn}, "
+                         f"max_sweeps {max_sweeps}, chains {chains}, keep {keep})")
     S, p, C = len(posts), spec.p, chains
     subs = _Subjects(posts, moments, spec)
     z = np.stack([st[rng.choice(len(st), C, replace=len(st) < C)] for st in starts], axis=1)  # (C, S, d)
@@ -380,8 +385,10 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
     within = np.median([np.var(x, axis=0) for x in u_sep], axis=0)
     between = np.var([np.mean(x, axis=0) for x in u_sep], axis=0)
     weak = within > 0.25 * np.maximum(between - within, 1e-3 * between)
-    shift = _ShiftMoves(shift_move, weak, np.sqrt(within / S), spec)
-    draws = {"mu": [], "Sigma": [], "theta": []}
+    shift = _ShiftMoves(shift_move and subs.separable, weak, np.sqrt(within / S), spec)
+    # every stride-th sweep after the burn-in is kept; the stride doubles whenever 2 keep are held,
+    # so exactly the draws thinned by ceil(n / keep) while n < 2 keep
+    draws, stride = {"mu": [], "Sigma": [], "theta": []}, 1
     sweeps, checks, converged, next_check = 0, [], False, burn + check_every
     while sweeps < max_sweeps:
         # 1. every subject, all chains: independence Metropolis-Hastings
@@ -413,13 +420,16 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
         if sweeps < burn:
             shift.adapt(sweeps, burn, mu, Sigma, within)
         sweeps += 1
-        if sweeps > burn:
+        if sweeps > burn and (sweeps - burn - 1) % stride == 0:
             draws["mu"].append(mu.copy())
             draws["Sigma"].append(Sigma.copy())
             draws["theta"].append(theta.copy())
+            if len(draws["mu"]) == 2 * keep:  # memory bounded whatever max_sweeps: every other draw
+                draws = {k: v[::2] for k, v in draws.items()}
+                stride *= 2
         if sweeps >= next_check:  # on the draws as they would be kept (thinned to <= keep a chain)
             n = sweeps - burn
-            th = max(1, math.ceil(n / keep))
+            th = max(1, math.ceil(len(draws["mu"]) / keep))
             hyper = _hyper_draws(np.stack(draws["mu"][::th], 1), np.stack(draws["Sigma"][::th], 1), spec)
             ess_b = min(float(np.min(az.ess(v))) for v in hyper.values())
             ess_t = min(float(np.min(az.ess(v, method="tail", prob=(0.05, 0.95)))) for v in hyper.values())
@@ -430,9 +440,9 @@ def run_gibbs(posts, moments, starts, spec, rng, *, chains=8, burn=300, ess_targ
                 break
             next_check = sweeps + max(check_every, int(0.1 * n))
     n = sweeps - burn
-    out = {k: np.stack(v, axis=1) for k, v in draws.items()}  # (C, n, ...)
-    thin = max(1, math.ceil(n / keep))
-    out = {k: v[:, ::thin] for k, v in out.items()}
+    th = max(1, math.ceil(len(draws["mu"]) / keep))
+    out = {k: np.stack(v[::th], axis=1) for k, v in draws.items()}  # (C, <= keep, ...)
+    thin = stride * th
     out.update(_hyper_draws(out.pop("mu"), out.pop("Sigma"), spec))
     out.update(converged=converged, sweeps=sweeps, burn=burn, thin=thin, checks=checks,
                acceptance=(accept / max(n, 1)).tolist(),

@@ -38,12 +38,15 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # names used only in annotations
-    import os
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
 
 import json
 import math
+import os
+import sys
+import time
 import warnings
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -55,14 +58,18 @@ from .figure_store import storable
 from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator
 from .hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 from .outputs import check_outputs
+from .population_checks import FAMILIES, check_arguments, check_prob, check_size, check_subjects, not_converged
 
 __all__ = ["population", "PopulationResult", "PopulationWarning", "population_tables", "load_population", "subject_digest",
            "load_run", "DrawsFit", "FAMILIES"]
 
-FAMILIES = ("normal", "lognormal", "student_t")
 #: The population quantities :meth:`PopulationResult.summary` computes from mu and tau (natural
 #: units): the R-hat and ESS that describe them are those of mu and tau, on their own rows.
 DERIVED = ("mean", "sd", "median")
+#: the words of the note that a subject's data barely move a parameter's prior (information,
+#: not a problem of the result: :attr:`PopulationResult.problems`)
+_WEAK_DATA = "barely move the prior"
+BURN = 300  # Gibbs sweeps discarded as burn-in (population's default)
 _LKJ_ETA = 2.0
 
 
@@ -76,27 +83,74 @@ def load_run(path, model=None):
     """``{label: Fit}`` of a ``skinfit fit --by`` run directory or a campaign out directory
     (its ``index.json``).  Labels as the user wrote them: ``S01`` for a single grouping column
     (``subject=S01`` in the index), the full ``col=a,col2=b`` otherwise; a campaign with
-    several datasets adds ``dataset/``.  ``model`` picks one model of a campaign."""
-    from .groups import read_index
+    several datasets adds ``dataset/``.  ``model`` picks one model of a campaign.
 
-    index = Path(path) / "index.json" if Path(path).is_dir() else Path(path)
-    rows, _ = read_index(index)
-    models = sorted({r.get("model") for r in rows})
-    if model is None and len(models) > 1:
-        raise InputError(index, f"fits of several models ({', '.join(models)}): choose one with --model", field="model")
-    rows = [r for r in rows if model is None or r.get("model") == model]
-    if not rows:
-        raise InputError(index, f"no completed fit of model {model!r} (models: {', '.join(models)})", field="model")
-    datasets = {r.get("dataset") for r in rows}
-    fits = {}
-    for r in rows:
-        label = str(r.get("group") or r.get("dataset"))
-        if label.count("=") == 1 and "," not in label:
-            label = label.split("=", 1)[1]
-        if len(datasets) > 1 and r.get("group"):
-            label = f"{r.get('dataset')}/{label}"
-        fits[label] = _load_light(r["path"])
+    Read while no writer holds the run (:func:`skinfit.groups.reading`); each fit must be the
+    one its index lists (its recorded group and data: :func:`skinfit.groups.listed_problem`),
+    and a fit ``--by`` run's data file unchanged since (else an InputError naming the subject
+    and what is wrong).  A campaign's fits of the model that are not complete (failed or
+    pending), and groups of a ``--by`` run's data its index does not list, are named in a
+    :class:`PopulationWarning`."""
+    from .groups import index_document, index_drift, listed_problem, missing_groups, read_index, reading
+
+    path = Path(path)
+    if path.is_dir() and not (path / "index.json").exists() and (path / "fit.nc").exists():
+        raise InputError(path, "holds a single fit (fit.nc), not fits of several subjects: give the folder of "
+                               "`skinfit fit ... --by subject` or of a campaign")
+    index = path / "index.json" if path.is_dir() else path
+    with reading(index.parent):
+        rows, _ = read_index(index)
+        kind, doc = index_document(index)
+        if not rows:
+            raise InputError(index, "lists no completed fit: nothing to pool")
+        models = sorted({str(r.get("model")) for r in rows})
+        if model is None and len(models) > 1:
+            raise InputError(index, f"fits of several models ({', '.join(models)}): choose one with --model "
+                                    "(Python: model=)", field="model")
+        rows = [r for r in rows if model is None or r.get("model") == model]
+        if not rows:
+            raise InputError(index, f"no completed fit of model {model!r} (models: {', '.join(models)})", field="model")
+        datasets = {r.get("dataset") for r in rows}
+        fits, where = {}, {}
+        for r in rows:
+            label = _label(r, len(datasets) > 1)
+            if label in fits:
+                raise InputError(index, f"lists subject {label!r} twice ({where[label]} and {r['path']})")
+            f = _load_light(r["path"])
+            problem = listed_problem(f.attrs, r.get("group") or "", r.get("dataset_sha256"))
+            if problem:
+                raise InputError(r["path"], f"listed for subject {label} in {index} but {problem}")
+            fits[label], where[label] = f, r["path"]
+        names = ", ".join(list(fits)[:5]) + (f" and {len(fits) - 5} more" if len(fits) > 5 else "")
+        drift = index_drift(index, doc, f"the fits of {names}") if kind == "by" else None
+    if drift:
+        raise InputError(index, drift[len(f"{index}: "):] + " (they are stale)")
+    if kind == "by" and (missing := missing_groups(doc)):  # e.g. a `fit --by` killed part-way
+        shown = [_label({"group": g}, False) for g in missing]
+        warnings.warn(f"the run's data hold {len(missing)} group(s) its index does not list "
+                      f"({', '.join(shown[:5])}{' ...' if len(shown) > 5 else ''}: a `skinfit fit --by` that did not "
+                      f"finish?): the population is of the other {len(fits)} subjects only", PopulationWarning,
+                      stacklevel=2)
+    if kind == "campaign":
+        chosen = model or rows[0].get("model")
+        missing = [f"{_label(r, len(datasets) > 1)} ({r.get('status')})" for r in doc
+                   if isinstance(r, dict) and r.get("model") == chosen
+                   and r.get("status", "done") not in ("done", "complete")]
+        if missing:
+            warnings.warn(f"the campaign lists {len(missing)} fit(s) of {chosen} that are not complete "
+                          f"({', '.join(missing[:5])}{' ...' if len(missing) > 5 else ''}): the population is of "
+                          f"the other {len(fits)} subjects only", PopulationWarning, stacklevel=2)
     return fits
+
+
+def _label(row, several_datasets):
+    """A subject's label as the user wrote it (see :func:`load_run`)."""
+    label = str(row.get("group") or row.get("dataset"))
+    if label.count("=") == 1 and "," not in label:
+        label = label.split("=", 1)[1]
+    if several_datasets and row.get("group"):
+        label = f"{row.get('dataset')}/{label}"
+    return label
 
 
 def _load_light(path):
@@ -113,8 +167,8 @@ def _load_light(path):
     try:
         with h5netcdf.File(path, "r") as h:
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
-            if "model_id" not in attrs or "posterior" not in h.groups:
-                raise InputError(path, "not a skinfit fit (no model_id attribute or posterior group)")
+            if "model_id" not in attrs or "slots" not in attrs or "posterior" not in h.groups:
+                raise InputError(path, "not a skinfit fit (no model_id or slots attribute, or no posterior group)")
             groups = {}
             for g in ("posterior", "observed_data", "constant_data"):
                 if g in h.groups:
@@ -157,11 +211,33 @@ class DrawsFit:
 
 
 def _as_fits(fits, model=None):
-    if isinstance(fits, (str, Path)):
+    """{label: Fit or DrawsFit} of what :func:`population` was given (a run folder read by
+    :func:`load_run`); InputError for anything else, labels that collide or fewer than two."""
+    if isinstance(fits, (str, os.PathLike)):
         fits = load_run(fits, model)
-    if not isinstance(fits, dict):
-        fits = {f.dataset_id: f for f in fits}
-    if len(fits) < 2 or not all(isinstance(f, (Fit, DrawsFit)) for f in fits.values()):
+    elif isinstance(fits, Mapping):
+        fits = dict(fits)
+    elif isinstance(fits, Iterable) and not isinstance(fits, (bytes, Fit)):
+        listed = list(fits)
+        bad = next((i for i, f in enumerate(listed, 1) if not isinstance(f, (Fit, DrawsFit))), None)
+        if bad is not None:
+            raise InputError("population", f"item {bad} is a {type(listed[bad - 1]).__name__}, not a Fit", field="fits")
+        fits = {}
+        for i, f in enumerate(listed, 1):
+            if f.dataset_id in fits:
+                raise InputError("population", f"fits {list(fits).index(f.dataset_id) + 1} and {i} are both of "
+                                 f"{f.dataset_id}: give a mapping label -> Fit to tell subjects apart", field="fits")
+            fits[f.dataset_id] = f
+    else:
+        raise InputError("population", f"expected a run folder, a mapping label -> Fit or a list of Fits (got "
+                         f"{type(fits).__name__})", field="fits")
+    bad = next((k for k, f in fits.items() if not isinstance(f, (Fit, DrawsFit))), None)
+    if bad is not None:
+        raise InputError("population", f"subject {bad}: a {type(fits[bad]).__name__}, not a Fit", field="fits")
+    labels = {str(k) for k in fits}
+    if len(labels) < len(fits):
+        raise InputError("population", "subject labels that are the same as text (e.g. 1 and '1')", field="fits")
+    if len(fits) < 2:
         raise InputError("population", f"expected at least two Fit objects (got {len(fits)})", field="fits")
     models = {f.model_id for f in fits.values()}
     if len(models) > 1:
@@ -203,11 +279,14 @@ def _choose(first, parameters, family):
         model_params = _model_parameter_names(first)
         parameters = [n for n, s in slots.items() if s["base"] in model_params]
     parameters = [parameters] if isinstance(parameters, str) else list(parameters)
+    if not parameters:
+        raise InputError(f"fit of {first.model_id} on {first.dataset_id}", "the model has no parameters to pool "
+                         f"(sampled: {', '.join(slots)}): name them with --params", field="parameters")
     for name in parameters:
         if name not in slots:
             raise InputError(f"fit of {first.model_id} on {first.dataset_id}", f"no sampled parameter {name!r} "
                              f"(sampled: {', '.join(slots)})", field="parameters")
-    family = dict(family or {})
+    family = dict.fromkeys(parameters, family) if isinstance(family, str) else dict(family or {})
     for key, fam in family.items():
         if fam not in FAMILIES:
             raise InputError("--family", f"{key}: unknown family {fam!r} (expected one of {', '.join(FAMILIES)})")
@@ -332,7 +411,7 @@ class PopulationResult:
         """Per parameter: population mean, sd and median (natural units), ``mu`` and ``sd`` in
         the population coordinate, correlations: median and central ``prob`` interval, with the
         family, R-hat and ESS of ``mu`` / ``sd``."""
-        a = 0.5 * (1 - prob)
+        a = 0.5 * (1 - check_prob(prob, "summary"))
         rows = []
         draws = self.population_draws()
         diag = self.diagnostics().set_index(["parameter", "quantity"])
@@ -361,7 +440,7 @@ class PopulationResult:
         """Per subject and parameter: separate-fit and shrunk posterior median and interval, and
         the contraction of the subject's own fit (1 - var posterior / var prior, sampling
         coordinate: near 0 the subject's data barely moved its prior)."""
-        a = 0.5 * (1 - prob)
+        a = 0.5 * (1 - check_prob(prob, "subject_summary"))
         rows = []
         for i, s in enumerate(self.subjects):
             for j, name in enumerate(self.parameters):
@@ -378,7 +457,14 @@ class PopulationResult:
         the population mean (of ``mu`` in the population coordinate, i.e. of the median for a
         log-normal family), and of a new subject's value."""
         j = self._index(parameter)
-        ref = math.log(reference) if self.log[j] and reference > 0 else reference
+        check_prob(prob, "effect")
+        if isinstance(reference, bool) or not isinstance(reference, (int, float, np.number)) or not np.isfinite(
+                reference):
+            raise InputError("effect", f"expected a finite number (got {reference!r})", field="reference")
+        if self.log[j] and reference <= 0:
+            raise InputError("effect", f"{parameter} has a log-normal population (every value > 0): expected a "
+                             f"reference > 0 (got {reference:g})", field="reference")
+        ref = math.log(reference) if self.log[j] else reference
         m = self.mu[:, :, j].ravel()
         new = self.predictive()[:, j]
         new_u = np.log(new) if self.log[j] else new
@@ -398,6 +484,7 @@ class PopulationResult:
         posterior of the difference of their population means (natural, or for log-normal
         families the ratio of medians), interval and P(A > B)."""
         ja, jb = self._index(a), self._index(b)
+        check_prob(prob, "contrast")
         if self.log[ja] != self.log[jb]:
             raise InputError("contrast", f"{a} and {b} have different population coordinates")
         d = (self.mu[:, :, ja] - self.mu[:, :, jb]).ravel()
@@ -412,6 +499,7 @@ class PopulationResult:
         """The default questions: every population parameter whose prior allows both signs
         (a slope with a condition) against 0, and each level of a split parameter against its
         first level.  A table."""
+        check_prob(prob, "effects")
         rows = []
         bounds = self.hyperpriors.get("_bounds", {})
         for name in self.parameters:
@@ -431,7 +519,7 @@ class PopulationResult:
         return pd.DataFrame(rows)
 
     def _index(self, name):
-        if name not in self.parameters:
+        if not isinstance(name, str) or name not in self.parameters:
             raise InputError("population", f"no population parameter {name!r} (parameters: "
                              f"{', '.join(self.parameters)})", field="parameter")
         return self.parameters.index(name)
@@ -480,11 +568,20 @@ class PopulationResult:
         return tree
 
     def save(self, path):
-        """Write :meth:`to_datatree` as NetCDF (h5netcdf)."""
+        """Write :meth:`to_datatree` as NetCDF (h5netcdf), atomically (temporary file + rename:
+        a reader never sees a torn file, a failed write leaves the previous one)."""
+        from .checkpoint import replace_atomic
+
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.to_datatree().to_netcdf(path, engine="h5netcdf")
+        replace_atomic(path, bytes(self.to_datatree().to_netcdf(engine="h5netcdf")))
         return path
+
+    @property
+    def problems(self):
+        """The warnings that mean the result cannot be reported as it stands (not converged, a
+        sampler that rarely moved, incomplete inputs): all but the notes that a subject's data
+        barely move a parameter's prior, which is information about the data."""
+        return [w for w in self.warnings if _WEAK_DATA not in w]
 
 
 def _diag(name, qty, x, az):
@@ -498,7 +595,12 @@ def load_population(path):
     ``inputs`` is empty for a file written before skinfit recorded them."""
     import arviz as az
 
-    tree = az.from_netcdf(path)
+    if not Path(path).is_file():
+        raise InputError(path, "no such population file (expected the population.nc of `skinfit population`)")
+    try:
+        tree = az.from_netcdf(path)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(path, f"not a readable population result ({type(exc).__name__}: {exc})") from None
     if tree.attrs.get("kind") != "skinfit.population":
         raise InputError(path, "not a skinfit population result")
     post = tree["posterior"].to_dataset()
@@ -528,7 +630,7 @@ def population_tables(result, prob=0.95):
 def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, parameters: Sequence[str] | None = None,
                *, family: str | Mapping[str, str] | None = None, correlated: bool = False, method: str = "gibbs",
                rng: int | np.random.Generator | None = None, model: str | None = None, chains: int = 8,
-               ess_target: float = 400, rhat_max: float = 1.01, max_sweeps: int = 20000, burn: int = 300,
+               ess_target: float = 400, rhat_max: float = 1.01, max_sweeps: int = 20000, burn: int = BURN,
                min_contraction: float = 0.5, n_draws: int = 1000, max_steps: int = 20000,
                cache: str | os.PathLike | None = None) -> PopulationResult:
     """Infer the population distribution of ``parameters`` from separate per-subject fits.
@@ -567,11 +669,33 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     Returns
     -------
     PopulationResult
+        Its ``warnings`` (also warned as :class:`PopulationWarning`) and ``problems`` (those
+        that mean it cannot be reported as it stands): a hyper-posterior that did not converge
+        is said with the population parameters the data cannot determine, why, and the options
+        that would help (:func:`skinfit.population_checks.not_converged`).
+
+    Raises
+    ------
+    InputError
+        Before any sampling, for a bad argument (:func:`skinfit.population_checks.check_arguments`),
+        fits that are not distinct subjects of the data as they are now (a fit filed under
+        another subject, one fit under two labels, a data file edited since:
+        :func:`skinfit.population_checks.check_subjects`), or a run being written.
     """
+    parameters, family = check_arguments(parameters, family, correlated, method, rng, model, chains, ess_target,
+                                         rhat_max, max_sweeps, burn, min_contraction, n_draws, max_steps, cache)
     if rng is None:  # a seed drawn here, recorded in the result's sampler record like a given one
-        rng = int(np.random.SeedSequence().entropy)
+        rng = int(np.random.SeedSequence().entropy % 2**63)  # as fit(): one --seed accepts
     seed, rng = rng, as_generator(rng)
-    fits = _as_fits(fits, model)
+    with warnings.catch_warnings(record=True) as read:  # a run's notes (a campaign's incomplete fits) are kept
+        warnings.simplefilter("always", PopulationWarning)
+        fits = _as_fits(fits, model)
+    notes = [str(w.message) for w in read if issubclass(w.category, PopulationWarning)]
+    for w in read:
+        if not issubclass(w.category, PopulationWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    digests = {s: subject_digest(f) for s, f in fits.items() if isinstance(f, Fit)}
+    check_subjects(fits, digests)
     key = None
     if (cache is not None and isinstance(seed, (int, np.integer)) and all(isinstance(f, Fit) for f in fits.values())
             and all(storable(f) for f in fits.values())):  # a user's model code is not in the key: not kept
@@ -587,14 +711,15 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     subjects = list(fits)
     first = fits[subjects[0]]
     parameters, fams, logs, slots, priors = _choose(first, parameters, family)
-    if method not in ("gibbs", "reweight"):
-        raise InputError("population", f"unknown method {method!r} (expected gibbs or reweight)", field="method")
     if correlated and "student_t" in fams:
-        raise InputError("--family", "student_t populations are independent only (drop --correlated)")
+        raise InputError("--family", "student_t populations are independent only (drop --correlated; Python: "
+                               "correlated=False)")
     if method == "reweight" and (fams != ["lognormal" if priors[slots[n]["base"]].lower >= 0 else "normal"
                                           for n in parameters]):
         raise InputError("population", "method='reweight' supports only the default families", field="method")
-    warn = []
+    if method == "gibbs":
+        check_size(chains, len(subjects), len(slots), len(parameters))
+    warn = list(notes)
     for s in subjects[1:]:
         if fits[s].attrs.get("priors_sha256") != first.attrs.get("priors_sha256"):
             warn.append(f"subject {s} was fitted under another prior file than {subjects[0]}: the hyper-priors "
@@ -602,7 +727,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         names = [x["name"] for x in fits[s].attr("slots")]
         if names != list(slots):
             raise InputError("population", f"subject {s} has other sampled parameters ({', '.join(names)}) than "
-                             f"{subjects[0]} ({', '.join(slots)}): fit all subjects with the same split", field="fits")
+                             f"{subjects[0]} ({', '.join(slots)}): fit all subjects with the same --split "
+                             "(Python: split=)", field="fits")
     hyper, centre, scale = {}, [], []
     for name, fam, lg in zip(parameters, fams, logs):
         prior = priors[slots[name]["base"]]
@@ -640,10 +766,11 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     if method == "gibbs":
         index = [list(slots).index(n) for n in parameters]
         spec = Spec(index, logs, [f == "student_t" for f in fams], centre, scale, correlated and len(parameters) > 1)
-        separable = all(posts[0].slots[j].transform in ("log", "identity", "shift_log") for j in range(posts[0].ndim))
         moments = [(z.mean(axis=0), np.cov(z.T)) for z in zdraws]
+        t0 = time.perf_counter()
         out = run_gibbs(posts, moments, zdraws, spec, rng, chains=chains, burn=burn, ess_target=ess_target,
-                        rhat_max=rhat_max, max_sweeps=max_sweeps, shift_move=separable)
+                        rhat_max=rhat_max, max_sweeps=max_sweeps)
+        sampling_seconds = time.perf_counter() - t0
         shrunk = out["theta"][..., index]
         sampler = {"method": "gibbs (Metropolis-within-Gibbs)", "chains": chains, "sweeps": out["sweeps"],
                    "burn": out["burn"], "thin": out["thin"], "converged": out["converged"], "checks": out["checks"],
@@ -654,9 +781,10 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
                 warn.append(f"subject {s}: independence proposal accepted in {acc:.1%} of sweeps: its chain moves "
                             f"rarely (its separate fit is far from its population-conditional posterior)")
     else:
+        sampling_seconds = 0.0
         mu, sd, corr, shrunk, sampler = _reweight(fits, subjects, parameters, slots, priors, logs, centre, scale,
                                                   correlated, rng, n_draws, ess_target, max_steps, warn)
-    inputs = {s: subject_digest(fits[s]) for s in subjects} if all(isinstance(f, Fit) for f in fits.values()) else {}
+    inputs = digests if len(digests) == len(fits) else {}
     result = PopulationResult(first.model_id, parameters, fams, subjects, mu, sd, corr, shrunk, separate, hyper,
                               sampler, warn, contraction, inputs)
     diag = result.diagnostics()
@@ -664,12 +792,11 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     result.sampler.update(rhat_max=float(worst_rhat), ess_min=float(worst_ess),
                           seed=int(seed) if isinstance(seed, (int, np.integer)) else "a numpy Generator given")
     if not result.converged or (np.isfinite(worst_rhat) and worst_rhat > rhat_max) or worst_ess < ess_target:
-        warn.append(f"hyper-posterior not converged: max R-hat {worst_rhat:.3f}, min ESS {worst_ess:.0f} "
-                    f"(targets {rhat_max:g}, {ess_target:g}); rerun with a larger max_sweeps")
+        warn.append(not_converged(result, (rhat_max, ess_target), min_contraction, sampling_seconds))
     for n in parameters:
         weak = [s for s in subjects if contraction[s][n] < min_contraction]
         if weak:
-            warn.append(f"{n}: the data of {len(weak)} subject(s) ({', '.join(weak)}) barely move the prior "
+            warn.append(f"{n}: the data of {len(weak)} subject(s) ({', '.join(weak)}) {_WEAK_DATA} "
                         f"(contraction < {min_contraction:g}): their shrunk {n} is mostly the population's")
     for w in warn:
         warnings.warn(w, PopulationWarning, stacklevel=2)
@@ -783,7 +910,7 @@ def _reweight(fits, subjects, parameters, slots, priors, logs, centre, scale, co
         shrunk[:, i] = np.where(logs, np.exp(z[i][pick]), z[i][pick])
         if ess[s] < 50:
             warn.append(f"subject {s}: importance-weight effective sample size {ess[s]:.0f} < 50 (of {S} draws): "
-                        f"too few for the reweighting; use method='gibbs'")
+                        f"too few for the reweighting; use --method gibbs (Python: method='gibbs')")
     sampler = {"method": "reweight (emcee over the importance-sampled hyper-likelihood)", "converged": run.converged,
                "n_steps": run.n_steps, "reasons": list(run.reasons), "draws_per_subject": S, "importance_ess": ess}
     def chains(x):
@@ -860,11 +987,16 @@ class _HyperPosterior:
 
 # ---- command line -------------------------------------------------------------------------
 def _parse_family(items):
+    """``--family PARAM=FAMILY`` items -> {param: family}; each parameter once."""
     out = {}
     for item in items or []:
         name, sep, fam = item.partition("=")
-        if not sep or not fam:
+        name, fam = name.strip(), fam.strip()
+        if not sep or not fam or not name:
             raise InputError("--family", f"expected PARAMETER=FAMILY (got {item!r}; families: {', '.join(FAMILIES)})")
+        if name in out:
+            raise InputError("--family", f"{name} given twice ({name}={out[name]} and {item}): give each parameter "
+                                         "once")
         out[name] = fam
     return out
 
@@ -873,41 +1005,69 @@ def _parse_family(items):
 FILES = ("population.nc", "population_summary.csv", "population_subjects.csv", "population_effects.csv")
 
 
+def _parse_params(items):
+    """``--params NAME[,NAME]`` items -> a list of names (None: every model parameter)."""
+    if not items:
+        return None
+    names = []
+    for item in items:
+        parts = [p.strip() for p in item.split(",")]
+        if not all(parts):
+            raise InputError("--params", f"expected NAME[,NAME] (got {item!r}: an empty name)")
+        names += parts
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise InputError("--params", f"{', '.join(twice)} given twice: name each population parameter once")
+    return names
+
+
 def cli_population(args):
     """``skinfit population RUN_DIR``: the population of a ``fit --by`` run or a campaign;
     writes ``population.nc`` (ArviZ tree) and ``population_summary.csv`` /
-    ``population_subjects.csv`` / ``population_effects.csv`` to ``--out`` and prints them."""
-    import time
+    ``population_subjects.csv`` / ``population_effects.csv`` to ``--out`` and prints them.
+
+    Every option is checked before a fit is read; the run is read while no writer holds it
+    and ``--out`` is held with the lock ``skinfit fit`` takes there (a second population into
+    the same ``--out`` is refused, not interleaved); files are replaced atomically.  A result
+    with problems (not converged, a sampler that rarely moved; :attr:`PopulationResult.problems`)
+    is written and said so on stderr; with ``--strict`` the exit status is then 3."""
+    from .checkpoint import CheckpointLock, replace_atomic
 
     t0 = time.perf_counter()
-    params = None
-    if args.params:
-        params = [p for item in args.params for p in item.split(",") if p]
-    out = Path(args.out) if args.out else Path(args.run) / "population"
+    params, family = _parse_params(args.params), _parse_family(args.family)
+    if args.max_sweeps <= BURN:
+        raise InputError("--max-sweeps", f"expected more than the {BURN} burn-in sweeps (got {args.max_sweeps})")
+    run = Path(args.run)
+    if not run.exists():
+        raise InputError(run, "no such run folder (expected the --out of `skinfit fit ... --by` or of a campaign)")
+    out = Path(args.out) if args.out else (run if run.is_dir() else run.parent) / "population"
     check_outputs(out, FILES, command="skinfit population", overwrite=args.overwrite)  # before the sampling
-    with warnings.catch_warnings():  # the warnings are printed below, with the result
-        warnings.simplefilter("ignore", PopulationWarning)
-        result = population(args.run, params, family=_parse_family(args.family), correlated=args.correlated,
-                            method=args.method, rng=args.seed, model=args.model,
-                            cache=out / ".cache" / "population.npz")
-    out.mkdir(parents=True, exist_ok=True)
-    tables = population_tables(result)
-    path = result.save(out / "population.nc")
-    tables["hyper"].to_csv(out / "population_summary.csv", index=False)
-    tables["subjects"].to_csv(out / "population_subjects.csv", index=False)
-    tables["effects"].to_csv(out / "population_effects.csv", index=False)
+    if out.resolve() == (run if run.is_dir() else run.parent).resolve():
+        raise InputError(out, "is the run's own folder: give the population another --out (default RUN/population)")
+    with CheckpointLock(out / "checkpoint.h5"):  # the lock of `skinfit fit --out`: one writer at a time
+        # again inside the lock: a second population into this --out may have finished meanwhile
+        check_outputs(out, FILES, command="skinfit population", overwrite=args.overwrite)
+        with warnings.catch_warnings():  # the warnings are printed below, with the result
+            warnings.simplefilter("ignore", PopulationWarning)
+            result = population(args.run, params, family=family, correlated=args.correlated, method=args.method,
+                                rng=args.seed, model=args.model, max_sweeps=args.max_sweeps,
+                                cache=out / ".cache" / "population.npz")
+        tables = population_tables(result)
+        for name, table in (("summary", "hyper"), ("subjects", "subjects"), ("effects", "effects")):
+            replace_atomic(out / f"population_{name}.csv", tables[table].to_csv(index=False).encode())
+        path = result.save(out / "population.nc")
     s = result.sampler
     lines = [f"population of {len(result.subjects)} subjects ({result.model_id}), method {s['method']}, "
              f"seed {s.get('seed')}",
-             "families: " + ", ".join(f"{p} {f}" + ("" if (args.family and (p in _parse_family(args.family)))
-                                                    else " (default)") for p, f in zip(result.parameters, result.families)),
+             "families: " + ", ".join(f"{p} {f}" + ("" if (p in family) else " (default)")
+                                      for p, f in zip(result.parameters, result.families)),
              "hyper-priors (from the prior file): " + "; ".join(f"{p}: mu ~ {h['mu']}, sd ~ {h['sd']}"
                                                                for p, h in result.hyperpriors.items()
                                                                if not p.startswith("_")),
              f"converged: {'yes' if result.converged and not any('not converged' in w for w in result.warnings) else 'NO'}"
              f"  (max R-hat {s['rhat_max']:.4f}, min ESS {s['ess_min']:.0f}"
              + (f", {s['sweeps']} sweeps of {s['chains']} chains" if "sweeps" in s else "") + ")",
-             *[f"WARNING: {w}" for w in result.warnings], ""]
+             *[f"{'WARNING' if w in result.problems else 'NOTE'}: {w}" for w in result.warnings], ""]
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
         lines.append(tables["hyper"].to_string(index=False))
         if len(tables["effects"]):
@@ -915,4 +1075,14 @@ def cli_population(args):
     print("\n".join(lines))
     print(f"\nwritten: {path}, {out / 'population_summary.csv'}, population_subjects.csv, population_effects.csv"
           f"  ({time.perf_counter() - t0:.1f} s)")
+    if result.problems:
+        sys.stdout.flush()
+        verdict = "NOT converged" if not result.converged or any("not converged" in w for w in result.problems) \
+            else "has problems"
+        print(f"skinfit: the population {verdict} ({len(result.problems)} problem(s), see WARNING above): its "
+              f"numbers are not to be reported as they stand" + ("" if args.strict else
+                                                                 "; --strict makes this exit with status 3"),
+              file=sys.stderr)
+        if args.strict:
+            return 3
     return 0
