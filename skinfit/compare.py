@@ -5,11 +5,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
     from .fit import Fit
 
 import json
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -61,9 +62,12 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
             rng: int | np.random.Generator | None = None) -> pd.DataFrame:
     """One table ranked by log evidence: log Z +- se, log Bayes factor against the best with its
     error and strength in words (Kass & Raftery 1995), and PSIS-LOO elpd +- se with the number of
-    Pareto k > 0.7.  Refuses fits made on different data.
+    Pareto k > 0.7.  Refuses fits made on different data.  A row per fit, named by the mapping's
+    keys, else by :func:`skinfit.run_labels.run_labels` (model id; two fits of one model told
+    apart by their options, file or content).
     """
-    fits = list(fits)
+    labels = [str(k) for k in fits] if isinstance(fits, Mapping) else None
+    fits = list(fits.values()) if isinstance(fits, Mapping) else list(fits)
     if len(fits) < 2:
         raise InputError("compare", "need at least two fits to compare")
     hashes = {f.attrs["dataset_sha256"] for f in fits}
@@ -71,7 +75,9 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
         described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.attrs['dataset_sha256'][:12]})" for f in fits)
         raise InputError("compare", f"fits were made on different data and cannot be compared: {described}")
     rows = []
-    for f, label in zip(fits, run_labels(fits)):  # two runs of one model: labelled by their options
+    if labels is None or len(set(labels)) < len(labels):
+        labels = run_labels(fits)  # two runs of one model: labelled by their options, file or content
+    for f, label in zip(fits, labels):
         ev = evidence(f, method=method, rng=rng)
         lo = loo_record(f)
         rows.append({"model": label, "log_z": ev.log_z, "log_z_se": ev.se, "method": ev.method,
