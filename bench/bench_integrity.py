@@ -200,7 +200,8 @@ def main():
              f"Written by `{' '.join(['python', *sys.argv])}` (skinfit {skinfit.__version__}); see the "
              "script's docstring for what each column means.", ""]
     lines += ["## Zeroed 4 KiB windows", "", "Every window that touches HDF5's structures or the attributes, at "
-              f"four alignments; every {args.stride}th inside the variables' values, at two.", "", "| file | bytes | windows | refused | same | CHANGED | crash | hang |",
+              f"four alignments; every {args.stride}th inside the variables' values, at two.", "",
+              "| file | bytes | windows | refused | same | CHANGED | crash | hang |",
               "|---|---|---|---|---|---|---|---|"]
     found = []
     for path, read in ((args.fit, _read_fit), (args.population, _read_population)):

@@ -1,6 +1,7 @@
 """The one error type for bad user input, and the warnings skinfit emits."""
 
-__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "MissingDependency", "require_optional"]
+__all__ = ["InputError", "ConvergenceWarning", "SupportWarning", "IntegrityWarning", "MissingDependency",
+           "require_optional"]
 
 
 class InputError(ValueError):
@@ -39,6 +40,11 @@ class ConvergenceWarning(UserWarning):
 
 class SupportWarning(UserWarning):
     """A prediction was requested at a parameter point outside the model's physical support."""
+
+
+class IntegrityWarning(UserWarning):
+    """A saved result read without a check for damage: written before skinfit recorded checksums
+    (:mod:`skinfit.integrity`)."""
 
 
 class MissingDependency(ImportError):

@@ -949,7 +949,8 @@ class _StoredGroups:
         self.identity = self._identity()
         self.names = []
         self.order = []
-        self.record = None  # the file's checksums (skinfit.integrity), checked as each group is read
+        self.sealed = False  # its bytes checked against the sha256 they end with (skinfit.integrity)
+        self.record = None  # else its content's checksums, checked as each group is read
 
     def _identity(self):
         st = os.stat(self.path)
@@ -959,7 +960,7 @@ class _StoredGroups:
         """The tree without the groups of :data:`DEFERRED` (listed in ``names``)."""
         from ._netcdf import NotPlain, read_groups
 
-        integrity.check_file(self.path)  # its bytes, before HDF5 parses any of them
+        self.sealed = integrity.check_file(self.path)  # its bytes, before HDF5 parses any of them
         try:  # the layout Fit.save writes, read directly; any other by h5netcdf
             order, attrs, nodes = read_groups(self.path, lambda g: g not in DEFERRED)
         except NotPlain:
@@ -972,7 +973,7 @@ class _StoredGroups:
                     return self._whole()  # not Fit.save's layout
                 attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
                 nodes = {g: _decoded(group) for g, group in light.items()}
-        self.record = integrity.take(self.path, attrs, order)
+        self.record = integrity.take(self.path, attrs, order, sealed=self.sealed)  # else its content's checksums
         integrity.verify(self.path, self.record, groups=nodes)
         self.order, self.names = order, [g for g in order if g in DEFERRED]
         return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
@@ -980,7 +981,7 @@ class _StoredGroups:
     def _whole(self):
         """The whole tree of a file of another layout (``xarray.open_datatree``), checked."""
         tree = xr.open_datatree(self.path, engine="h5netcdf").load()
-        record = integrity.take(self.path, tree.attrs, list(tree.children))
+        record = integrity.take(self.path, tree.attrs, list(tree.children), sealed=self.sealed)
         integrity.verify(self.path, record, groups=integrity.groups_of(tree))
         return tree
 

@@ -1,22 +1,21 @@
 """Checksums of the results skinfit saves: a damaged file is refused, never read as other numbers.
 
-Two checks. The file's bytes: :func:`seal` appends to the bytes of a netCDF file the sha256 of
-those bytes (:data:`TRAILER`, 81 bytes past HDF5's end of file, which every HDF5 reader
-ignores), and :func:`check_file` compares them before any library parses the file: HDF5
-itself hangs reading a variable-length string whose heap was zeroed (h5py 3.16, HDF5 2.0.0),
-so damage must be found before it is parsed. And the content: :func:`stamp` records in a root attribute (:data:`RECORD`) of a tree about to be written the
-sha256 of its root attributes (provenance, records, and the caches of evidence, LOO and
-summary) and of each group (its attributes, and each variable's name, dimensions, shape,
-type, attributes and values). :func:`take` and :func:`verify` check a tree as read against
-that record. The digests are of the decoded content, not of the bytes on disk, so any reader
-that gives the same Datasets (skinfit's own, h5netcdf, ``xarray.open_datatree``) checks the
-same file; groups read later (a fit's pointwise groups) are checked when read.
+Two checks. The bytes: :func:`seal` appends to a netCDF file's bytes their sha256
+(:data:`TRAILER`, 81 bytes past HDF5's end of file, which HDF5 readers ignore), and
+:func:`check_file` compares them before any library parses the file, because HDF5 itself
+hangs reading a text attribute whose heap was zeroed (h5py 3.16, HDF5 2.0.0;
+bench/results/integrity.md). The content: :func:`stamp` records in a root attribute
+(:data:`RECORD`) the sha256 of the root attributes (provenance, records, the caches of
+evidence, LOO and summary) and of each group (its attributes, and each variable's name,
+dimensions, shape, type, attributes and values), as decoded, so that any reader giving the
+same Datasets (skinfit's, h5netcdf, ``xarray.open_datatree``) can check them with
+:func:`take` and :func:`verify`; skinfit does so for a file without the trailer (its end lost,
+or written by another tool), each group as it is read.
 
-A file without the trailer (its end lost, or written by another tool from skinfit's tree) is
-checked by its record alone. A file whose schema (:data:`SCHEMA_ATTR`) predates the record is read with an
-:class:`IntegrityWarning`: refusing it would strand every result saved before, and nothing
-in it can tell damage from an edit. A file of a later schema without the record is damaged
-(the attribute itself was lost) and refused.
+A file of a schema (:data:`SCHEMA_ATTR`) from before the checksums is read with an
+:class:`~skinfit.errors.IntegrityWarning`: refusing it would strand every result saved
+before, and nothing in it can tell damage from an edit. A later one without the record lost
+it to damage, and is refused.
 """
 
 import hashlib
@@ -25,9 +24,9 @@ import warnings
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, IntegrityWarning
 
-__all__ = ["RECORD", "SCHEMA_ATTR", "CHECKED_SCHEMA", "TRAILER", "IntegrityWarning", "seal", "check_file",
+__all__ = ["RECORD", "SCHEMA_ATTR", "CHECKED_SCHEMA", "TRAILER", "seal", "check_file",
            "digest_attrs", "digest_group", "groups_of", "stamp", "take", "verify"]
 
 #: Root attribute holding the checksums (JSON: ``{"algorithm", "root", "groups": {name: hex}}``).
@@ -40,10 +39,6 @@ _ALGORITHM = "sha256 of the decoded content, format 1"
 #: The start of the last bytes of a sealed file: this, the sha256 (hex) of every byte before it, a newline.
 TRAILER = b"\nskinfit sha256 "
 _TRAILER_SIZE = len(TRAILER) + 64 + 1
-
-
-class IntegrityWarning(UserWarning):
-    """A saved result read without a check for damage (written before skinfit recorded checksums)."""
 
 
 def seal(data):
@@ -154,12 +149,17 @@ def groups_of(tree):
     return out
 
 
-def take(path, attrs, groups, *, unversioned=None):
+def take(path, attrs, groups, *, sealed=False, unversioned=None):
     """The checksum record of a file read from ``path``: read from its root ``attrs``, parsed,
-    and checked against them and the names of the file's ``groups``. Returns the record, or None for a file of a schema before checksums (read with
-    an :class:`IntegrityWarning`; ``unversioned``: the schema of a file without
-    :data:`SCHEMA_ATTR`, None when every file of its kind has one). Raises :class:`InputError` (one line: the file and what
-    failed) when the record is missing, unreadable or does not match."""
+    and checked against them and the names of the file's ``groups``. Returns the record; None
+    for a file whose bytes :func:`check_file` found as written (``sealed``: nothing more to
+    check), and for a file of a schema before checksums (read with an
+    :class:`~skinfit.errors.IntegrityWarning`; ``unversioned``: the schema of a file without
+    :data:`SCHEMA_ATTR`, None when every file of its kind has one). Raises
+    :class:`InputError` (one line: the file and what failed) when the record is missing,
+    unreadable or does not match."""
+    if sealed:
+        return None
     text = attrs.get(RECORD)
     schema = attrs.get(SCHEMA_ATTR, unversioned)
     if text is None:

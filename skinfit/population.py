@@ -486,7 +486,7 @@ def load_population(path):
     import arviz as az
 
     try:
-        integrity.check_file(path)  # its bytes, before HDF5 parses any of them
+        sealed = integrity.check_file(path)  # its bytes, before HDF5 parses any of them
         tree = az.from_netcdf(path).load()
     except InputError:
         raise
@@ -495,7 +495,8 @@ def load_population(path):
                                f"{' '.join(str(exc).split())[:200]})") from None
     if tree.attrs.get("kind") != "skinfit.population" and integrity.RECORD not in tree.attrs:
         raise InputError(path, "not a skinfit population result")
-    record = integrity.take(path, tree.attrs, list(tree.children), unversioned=1)  # a result before checksums: 1
+    record = integrity.take(path, tree.attrs, list(tree.children), sealed=sealed,
+                            unversioned=1)  # a result written before checksums has no schema: 1
     integrity.verify(path, record, groups=integrity.groups_of(tree))
     if tree.attrs.get("kind") != "skinfit.population":
         raise InputError(path, "not a skinfit population result")

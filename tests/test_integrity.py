@@ -7,7 +7,6 @@ import io
 import json
 import shutil
 import warnings
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -18,6 +17,7 @@ import skinfit
 from skinfit import integrity
 from skinfit.cli import main
 from skinfit.compare import loo_record
+from skinfit.errors import IntegrityWarning
 
 SUBJECTS = ("S01", "S02", "S03")
 
@@ -177,7 +177,7 @@ def test_a_fit_file_from_before_checksums_is_read_with_a_note_and_one_that_lost_
     with h5py.File(old, "r+") as f:
         del f.attrs[integrity.RECORD]
         f.attrs[integrity.SCHEMA_ATTR] = np.int64(1)
-    with pytest.warns(integrity.IntegrityWarning, match=f"{old}: written before skinfit recorded checksums"):
+    with pytest.warns(IntegrityWarning, match=f"{old}: written before skinfit recorded checksums"):
         fit = skinfit.load_fit(old)
     np.testing.assert_array_equal(fit.group("posterior")["m0"].values,
                                   skinfit.load_fit(run / "S03" / "fit.nc").group("posterior")["m0"].values)

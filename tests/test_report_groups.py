@@ -325,9 +325,9 @@ def _top(index):
     """The top box of a report: its class and its items as (status, anchor, text)."""
     html = index.read_text()
     box = re.search(r'<section id="diagnostics" class="box (\w+)">(.*?)</section>', html, re.S)
+    item = r'<li><span class="tag (\w+)">\w+</span> (?:<a href="#([^"]*)">)?(.*?)</li>'
     items = [(st, anchor, html_text.unescape(re.sub(r"<[^>]+>", "", text)))
-             for st, anchor, text in re.findall(r'<li><span class="tag (\w+)">\w+</span> (?:<a href="#([^"]*)">)?(.*?)</li>',
-                                                box.group(2), re.S)]
+             for st, anchor, text in re.findall(item, box.group(2), re.S)]
     return box.group(1), items, html
 
 
@@ -442,13 +442,14 @@ def test_two_fits_of_one_model_on_one_dataset_keep_their_own_rows(subject_fits, 
         populations, contrasts = group_analyses({"a": subject_fits["S01"], "b": again, "c": subject_fits["S02"],
                                                  "d": subject_fits["S03"]}, echo=lambda m: None)
     assert populations == {}
-    index = report.write_report([*subject_fits.values(), again], tmp_path / "r",
-                                notes=[("analyses across fits", "S01 fitted more than once")])
+    report.write_report([*subject_fits.values(), again], tmp_path / "r")
     for name in ("m0", "beta_z0"):
         table = pd.read_csv(tmp_path / "r" / f"subjects_contact_area_{name}.csv", index_col="subject")
         assert sorted(table.index) == ["S01 [seed 10]", "S01 [seed 99]", "S02", "S03"]
         assert table.loc["S01 [seed 10]", "mean"] == pytest.approx(subject_fits["S01"].summary().loc[name, "mean"])
         assert table.loc["S01 [seed 99]", "mean"] == pytest.approx(again.summary().loc[name, "mean"])
+    index = report.write_report([*subject_fits.values(), again], tmp_path / "r",
+                                notes=[("analyses across fits", "S01 fitted more than once")])
     kind, items, _ = _top(index)
     assert ("WARN", "", "analyses across fits: S01 fitted more than once") in items
 
