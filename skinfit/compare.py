@@ -5,11 +5,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
     from .fit import Fit
 
 import json
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -63,11 +64,14 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
             rng: int | np.random.Generator | None = None) -> pd.DataFrame:
     """One table ranked by log evidence: log Z +- se, log Bayes factor against the best with its
     error and strength in words (Kass & Raftery 1995), and PSIS-LOO elpd +- se with the number of
-    Pareto k > 0.7.  Refuses fits made on different data.
+    Pareto k > 0.7.  Refuses fits made on different data.  A row per fit, named by the mapping's
+    keys, else by :func:`skinfit.run_labels.run_labels` (model id; two fits of one model told
+    apart by their options, file or content).
 
     An approximate estimate's caveat (Laplace: the prior bounds that cut its Gaussian, the
     bracket on log Z from the posterior draws) is in ``table.attrs["caveats"]``, model -> text.
     """
+    labels = [str(k) for k in fits] if isinstance(fits, Mapping) else None
     fits = as_fits(fits, "compare")
     if len(fits) < 2:
         raise InputError("compare", "need at least two fits to compare")
@@ -80,7 +84,9 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
         described = ", ".join(f"{f.model_id} on {f.dataset_id} ({f.attrs['dataset_sha256'][:12]})" for f in fits)
         raise InputError("compare", f"fits were made on different data and cannot be compared: {described}")
     rows, caveats = [], {}
-    for f, label in zip(fits, run_labels(fits)):  # two runs of one model: labelled by their options
+    if labels is None or len(set(labels)) < len(labels):
+        labels = run_labels(fits)  # two runs of one model: labelled by their options, file or content
+    for f, label in zip(fits, labels):
         ev = evidence(f, method=method, rng=rng)
         if ev.caveat:
             caveats[label] = ev.caveat

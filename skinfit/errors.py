@@ -8,7 +8,7 @@ than it passes to ``Exception.__init__`` inherits :class:`Portable`, and
 
 import pickle
 
-__all__ = ["InputError", "InputTypeError", "ForwardError", "ConvergenceWarning", "SupportWarning", "MissingDependency",
+__all__ = ["InputError", "InputTypeError", "ForwardError", "ConvergenceWarning", "SupportWarning", "IntegrityWarning", "MissingDependency",
            "require_optional", "Portable", "WorkerError", "portable", "error_line"]
 
 
@@ -73,6 +73,11 @@ class ConvergenceWarning(UserWarning):
 
 class SupportWarning(UserWarning):
     """A prediction was requested at a parameter point outside the model's physical support."""
+
+
+class IntegrityWarning(UserWarning):
+    """A saved result read without a check for damage: written before skinfit recorded checksums
+    (:mod:`skinfit.integrity`)."""
 
 
 class MissingDependency(Portable, ImportError):

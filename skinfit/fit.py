@@ -44,6 +44,7 @@ from .errors import ConvergenceWarning, InputError, InputTypeError
 from .models import Model, load_model
 from .guardrails import assess_run
 from .provenance import input_lines, input_record, inputs_of, warn_shadows
+from . import integrity
 
 __all__ = ["fit", "Fit", "load_fit", "as_generator", "resolve_inputs"]
 
@@ -347,7 +348,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
         dims[c] = ["obs_id"]
     ds = post.dataset
     attrs = {
-        "skinfit_schema": 1,
+        "skinfit_schema": integrity.CHECKED_SCHEMA,  # saved with checksums (skinfit.integrity)
         "model_id": post.model.id, "model_sha256": post.model.sha256, "model_card": post.model.card_text,
         "priors_id": post.priors.id, "priors_sha256": post.priors.sha256, "priors_text": post.priors.text,
         "dataset_id": ds.id, "dataset_sha256": ds.sha256, "dataset_path": ds.path,
@@ -570,12 +571,18 @@ class Fit:
     group, :meth:`summary`, :meth:`report_text` and the provenance properties do not.
     """
 
-    def __init__(self, idata, posterior=None, *, deferred=None, stored=None):
+    def __init__(self, idata, posterior=None, *, deferred=None, stored=None, path=None):
         self._tree = idata
+        self._path = None if path is None else Path(path)
         self._posterior = posterior
         self._deferred = deferred
         self._stored = stored  # a _StoredGroups: groups of DEFERRED still in the file (load_fit)
         self._summary = None  # (key, table) of the last summary(): see _summary_key
+
+    @property
+    def path(self):
+        """The file a loaded fit was read from (:func:`load_fit`); None for a fit made here."""
+        return self._path
 
     @property
     def pending(self):
@@ -864,14 +871,18 @@ class Fit:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the fit as NetCDF, atomically (temporary file + rename), with every group (a
-        pending fit is completed first).  ``path`` is the file (a directory, a device such as
-        /dev/null or a FIFO there is refused first)."""
+        pending fit is completed first) and the sha256 of each group and of the root attributes
+        (:mod:`skinfit.integrity`), which :func:`load_fit` checks.  ``path`` is the file (a
+        directory, a device such as /dev/null or a FIFO there is refused first)."""
         path = check_output_file(path, "Fit.save", "path", "fit")
         path.parent.mkdir(parents=True, exist_ok=True)
         # HDF5 writes into memory, never onto a disk that may fill (on a full disk it crashed the
         # process at exit, rc 139); the bytes go out by plain writes, so a full or read-only disk
         # is an OSError with the previous file in place
         tree = self.idata
+        schema = tree.attrs.get(integrity.SCHEMA_ATTR)
+        if not isinstance(schema, (int, np.integer)) or schema < integrity.CHECKED_SCHEMA:  # an older file saved again
+            tree.attrs[integrity.SCHEMA_ATTR] = integrity.CHECKED_SCHEMA  # (before its summary's key is computed)
         try:
             tree.attrs[SUMMARY_ATTR] = _summary_to_attr(self.summary(), self._summary_key())
         except Exception as exc:  # noqa: BLE001 - the summary is only kept to save time: the fit is saved without it
@@ -879,12 +890,13 @@ class Fit:
             warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
                           f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)
         dask = sys.modules.get("dask")  # in a Dask worker xarray would take a distributed lock named by the target
+        integrity.stamp(tree)  # the tree in memory as it is read back: with its checksums
         with (dask.config.set(scheduler="synchronous") if dask is not None else nullcontext()), \
                 _dask_unimported():
-            data = tree.to_netcdf(engine="h5netcdf")
+            data = integrity.seal(tree.to_netcdf(engine="h5netcdf"))  # and the sha256 of its bytes
         free = shutil.disk_usage(path.parent).free
-        if free < data.nbytes + (1 << 20):
-            raise OSError(errno.ENOSPC, f"no space to save the fit: {data.nbytes / 2**20:.1f} MiB needed, "
+        if free < len(data) + (1 << 20):
+            raise OSError(errno.ENOSPC, f"no space to save the fit: {len(data) / 2**20:.1f} MiB needed, "
                                         f"{free / 2**20:.1f} MiB free", str(path))
         from .checkpoint import replace_atomic
 
@@ -982,11 +994,23 @@ def load_fit(path: str | os.PathLike) -> Fit:
     try:
         stored = _StoredGroups(path)
         tree = stored.read_light()
-    except (OSError, ValueError, KeyError) as exc:
-        raise InputError(path, f"not a readable skinfit result ({' '.join(str(exc).split())})") from None  # one line
+    except InputError:
+        raise
+    except _UNREADABLE as exc:
+        raise InputError(path, f"not a readable skinfit result ({_one_line(exc)})") from None
     if "model_id" not in tree.attrs:
         raise InputError(path, "not a skinfit result (no model_id attribute)")
-    return Fit(tree, stored=stored if stored.names else None)
+    return Fit(tree, stored=stored if stored.names else None, path=path)
+
+
+#: What reading a damaged or foreign file can raise (HDF5's errors through h5py, numpy's for a
+#: corrupted shape, decoding errors): each becomes one line naming the file.
+_UNREADABLE = (OSError, ValueError, KeyError, TypeError, IndexError, RuntimeError, AttributeError, OverflowError,
+               MemoryError)
+
+
+def _one_line(exc):
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"[:300]
 
 
 class _StoredGroups:
@@ -998,6 +1022,8 @@ class _StoredGroups:
         self.identity = self._identity()
         self.names = []
         self.order = []
+        self.sealed = False  # its bytes checked against the sha256 they end with (skinfit.integrity)
+        self.record = None  # else its content's checksums, checked as each group is read
 
     def _identity(self):
         st = os.stat(self.path)
@@ -1007,6 +1033,7 @@ class _StoredGroups:
         """The tree without the groups of :data:`DEFERRED` (listed in ``names``)."""
         from ._netcdf import NotPlain, read_groups
 
+        self.sealed = integrity.check_file(self.path)  # its bytes, before HDF5 parses any of them
         try:  # the layout Fit.save writes, read directly; any other by h5netcdf
             order, attrs, nodes = read_groups(self.path, lambda g: g not in DEFERRED)
         except NotPlain:
@@ -1016,11 +1043,20 @@ class _StoredGroups:
                 order = list(h.groups)  # names only: a group's metadata is read when it is opened
                 light = {g: h.groups[g] for g in order if g not in DEFERRED}
                 if h.variables or any(g.groups for g in light.values()):
-                    return xr.open_datatree(self.path, engine="h5netcdf").load()  # not Fit.save's layout
+                    return self._whole()  # not Fit.save's layout
                 attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
                 nodes = {g: _decoded(group) for g, group in light.items()}
+        self.record = integrity.take(self.path, attrs, order, sealed=self.sealed)  # else its content's checksums
+        integrity.verify(self.path, self.record, groups=nodes)
         self.order, self.names = order, [g for g in order if g in DEFERRED]
         return xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | nodes)
+
+    def _whole(self):
+        """The whole tree of a file of another layout (``xarray.open_datatree``), checked."""
+        tree = xr.open_datatree(self.path, engine="h5netcdf").load()
+        record = integrity.take(self.path, tree.attrs, list(tree.children), sealed=self.sealed)
+        integrity.verify(self.path, record, groups=integrity.groups_of(tree))
+        return tree
 
     def read(self, tree):
         """``tree`` with the groups of ``names`` read from the file, in the file's order."""
@@ -1034,9 +1070,15 @@ class _StoredGroups:
         from ._netcdf import NotPlain, read_groups
 
         try:
-            extra = read_groups(self.path, lambda g: g in self.names)[2]
-        except NotPlain:
-            extra = self._read_h5netcdf()
+            try:
+                extra = read_groups(self.path, lambda g: g in self.names)[2]
+            except NotPlain:
+                extra = self._read_h5netcdf()
+        except InputError:
+            raise
+        except _UNREADABLE as exc:
+            raise InputError(self.path, f"its pointwise groups cannot be read ({_one_line(exc)})") from None
+        integrity.verify(self.path, self.record, groups=extra)
         nodes = {n: tree[n].to_dataset(inherit=False) for n in tree.children} | extra
         order = [g for g in self.order if g in nodes] + [g for g in nodes if g not in self.order]
         return xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)} | {n: nodes[n] for n in order})
@@ -1068,9 +1110,9 @@ SUMMARY_FORMAT = 1
 SUMMARY_COLUMNS = ("unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk", "ess_tail", "map", "tau",
                    "contraction", "note")
 #: Root attributes a saved fit may gain without its draws or records changing (evidence and LOO
-#: by a comparison, the stored summary): left out of content hashes such as the report's
+#: by a comparison, the stored summary, the file's checksums): left out of content hashes such as the report's
 #: figure cache (:meth:`Fit.content_hash`).
-CACHED_ATTRS = ("evidence", "loo", SUMMARY_ATTR)
+CACHED_ATTRS = ("evidence", "loo", SUMMARY_ATTR, integrity.RECORD)
 
 
 def _plain_json(value):

@@ -55,7 +55,9 @@ import pandas as pd
 
 from .errors import InputError
 from .figure_store import storable
-from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator
+from .checkpoint import replace_atomic
+from .fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator, load_fit
+from . import integrity
 from .hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 from .outputs import check_outputs
 from .population_checks import FAMILIES, check_arguments, check_prob, check_size, check_subjects, not_converged
@@ -154,30 +156,12 @@ def _label(row, several_datasets):
 
 
 def _load_light(path):
-    """A saved fit with only what a population needs (posterior, observed and constant data,
-    root attributes), read with h5netcdf directly: the pointwise log-likelihood and predictive
-    groups, most of a file, are not read, and xarray's decoding (0.4 s a file here, against
-    0.18 s) is skipped."""
-    import h5netcdf
-    import xarray as xr
-
-    from .fit import fit_file
-
-    path = fit_file(path)
-    try:
-        with h5netcdf.File(path, "r") as h:
-            attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
-            if "model_id" not in attrs or "slots" not in attrs or "posterior" not in h.groups:
-                raise InputError(path, "not a skinfit fit (no model_id or slots attribute, or no posterior group)")
-            groups = {}
-            for g in ("posterior", "observed_data", "constant_data"):
-                if g in h.groups:
-                    groups[g] = xr.Dataset({k: (v.dimensions, v[...]) for k, v in h.groups[g].variables.items()})
-    except (OSError, ValueError, KeyError) as exc:
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(path, f"not a readable skinfit result ({exc})") from None
-    return Fit(xr.DataTree.from_dict({"/": xr.Dataset(attrs=attrs)} | groups))
+    """A saved fit as :func:`skinfit.load_fit` reads it, checked against its checksums: the
+    pointwise log-likelihood and predictive groups, most of a file, are not read."""
+    fit = load_fit(path)
+    if "posterior" not in fit.partial_tree.children:
+        raise InputError(fit.path, "not a skinfit fit (no posterior group)")
+    return fit
 
 
 class DrawsFit:
@@ -547,9 +531,10 @@ class PopulationResult:
             post["corr"] = self.corr
             dims["corr"] = ["parameter", "parameter_b"]
         coords = {"parameter": self.parameters, "parameter_b": self.parameters, "subject": self.subjects}
-        attrs = {"kind": "skinfit.population", "model_id": self.model_id,
+        attrs = {"kind": "skinfit.population", integrity.SCHEMA_ATTR: integrity.CHECKED_SCHEMA, "model_id": self.model_id,
                  "families": json.dumps(dict(zip(self.parameters, self.families))),
-                 "coordinates": json.dumps(dict(zip(self.parameters, self.coordinates))),
+                 # not "coordinates": netCDF readers take that for CF's list of coordinate variables and drop it
+                 "population_coordinates": json.dumps(dict(zip(self.parameters, self.coordinates))),
                  "hyperpriors": json.dumps(self.hyperpriors), "sampler": json.dumps(self.sampler, default=float),
                  "warnings": json.dumps(self.warnings), "contraction": json.dumps(self.contraction),
                  "inputs": json.dumps(self.inputs)}
@@ -568,12 +553,13 @@ class PopulationResult:
         return tree
 
     def save(self, path):
-        """Write :meth:`to_datatree` as NetCDF (h5netcdf), atomically (temporary file + rename:
-        a reader never sees a torn file, a failed write leaves the previous one)."""
-        from .checkpoint import replace_atomic
-
+        """Write :meth:`to_datatree` as NetCDF (h5netcdf), with the sha256 of each group and of
+        the root attributes (:mod:`skinfit.integrity`), which :func:`load_population` checks."""
         path = Path(path)
-        replace_atomic(path, bytes(self.to_datatree().to_netcdf(engine="h5netcdf")))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tree = self.to_datatree()
+        integrity.stamp(tree)
+        replace_atomic(path, integrity.seal(tree.to_netcdf(engine="h5netcdf")))
         return path
 
     @property
@@ -598,23 +584,36 @@ def load_population(path):
     if not Path(path).is_file():
         raise InputError(path, "no such population file (expected the population.nc of `skinfit population`)")
     try:
-        tree = az.from_netcdf(path)
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise InputError(path, f"not a readable population result ({type(exc).__name__}: {exc})") from None
+        sealed = integrity.check_file(path)  # its bytes, before HDF5 parses any of them
+        tree = az.from_netcdf(path).load()
+    except InputError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, IndexError, RuntimeError, MemoryError) as exc:
+        raise InputError(path, f"not a readable skinfit population result ({type(exc).__name__}: "
+                               f"{' '.join(str(exc).split())[:200]})") from None
+    if tree.attrs.get("kind") != "skinfit.population" and integrity.RECORD not in tree.attrs:
+        raise InputError(path, "not a skinfit population result")
+    record = integrity.take(path, tree.attrs, list(tree.children), sealed=sealed,
+                            unversioned=1)  # a result written before checksums has no schema: 1
+    integrity.verify(path, record, groups=integrity.groups_of(tree))
     if tree.attrs.get("kind") != "skinfit.population":
         raise InputError(path, "not a skinfit population result")
-    post = tree["posterior"].to_dataset()
-    attrs = tree.attrs
-    fam = json.loads(attrs["families"])
-    params = [str(p) for p in post["parameter"].values]
-    subjects = [str(s) for s in tree["subjects"].to_dataset()["subject"].values]
-    sep_ds = tree["separate"].to_dataset()["theta"].values
-    sep = {s: sep_ds[i] for i, s in enumerate(subjects)}
-    return PopulationResult(attrs["model_id"], params, [fam[p] for p in params], subjects, post["mu"].values,
-                            post["sd"].values, post["corr"].values if "corr" in post else None,
-                            tree["subjects"].to_dataset()["theta"].values, sep, json.loads(attrs["hyperpriors"]),
-                            json.loads(attrs["sampler"]), json.loads(attrs["warnings"]),
-                            json.loads(attrs["contraction"]), json.loads(attrs.get("inputs", "{}")), str(path))
+    try:  # an old file (no checksums) damaged where an attribute or group was: one line, not a traceback
+        post = tree["posterior"].to_dataset()
+        attrs = tree.attrs
+        fam = json.loads(attrs["families"])
+        params = [str(p) for p in post["parameter"].values]
+        subjects = [str(s) for s in tree["subjects"].to_dataset()["subject"].values]
+        sep_ds = tree["separate"].to_dataset()["theta"].values
+        sep = {s: sep_ds[i] for i, s in enumerate(subjects)}
+        return PopulationResult(attrs["model_id"], params, [fam[p] for p in params], subjects, post["mu"].values,
+                                post["sd"].values, post["corr"].values if "corr" in post else None,
+                                tree["subjects"].to_dataset()["theta"].values, sep, json.loads(attrs["hyperpriors"]),
+                                json.loads(attrs["sampler"]), json.loads(attrs["warnings"]),
+                                json.loads(attrs["contraction"]), json.loads(attrs.get("inputs", "{}")), str(path))
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(path, f"not a complete skinfit population result ({type(exc).__name__}: "
+                               f"{' '.join(str(exc).split())[:200]})") from None
 
 
 def population_tables(result, prob=0.95):

@@ -3,7 +3,9 @@
 :func:`write_report` writes, into one directory, ``index.html`` (opens from disk: inline CSS,
 figures as PNG files beside it, no script, no network URL), ``summary.md`` with the same
 tables, and CSV tables: ``<fit>_summary.csv`` (exactly :meth:`Fit.summary`),
-``<fit>_diagnostics.csv`` and ``comparison.csv``. Diagnostics failures are listed at the top.
+``<fit>_diagnostics.csv`` and ``comparison.csv``. Every failed check of every section (fits,
+populations, comparisons, contrasts, designs: :mod:`skinfit.report_checks`) is listed at the
+top, linked to its section.
 Every section names the model card, prior file and dataset (with hashes) and the skinfit
 version that produced it. Reads only saved results.
 """
@@ -26,6 +28,7 @@ from .fit import _wall_time_text, as_fit
 from .labels import derived_units, parameter_units
 from .paths import package_version
 from .guardrails import BOUND_ALPHA, BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
+from .report_checks import comparison_issues, contrast_issues, design_issues, population_issues
 
 __all__ = ["write_report", "fit_diagnostics", "cli_report", "claim_report_folder"]
 
@@ -279,7 +282,7 @@ def _as_fits(fits):
 
     fits = [as_fit(f) for f in ([fits] if not isinstance(fits, (list, tuple)) else fits)]
     taken = set()
-    return [(_key(f, taken, label), f) for f, label in zip(fits, run_labels(fits, number_identical=False))]
+    return [(_key(f, taken, label), f) for f, label in zip(fits, run_labels(fits))]
 
 
 def _population_for(population, model_id, parameter):
@@ -677,7 +680,7 @@ def store_fit_figures(path, n_of_model=1):
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
-                 contrasts=None, designs=(), analyses=None):
+                 contrasts=None, designs=(), analyses=None, notes=None):
     """Write a self-contained static report of ``fits`` into ``out_dir``.
 
     Parameters
@@ -701,11 +704,14 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         drawn on the forest plots.
     contrasts : dict title -> DataFrame, optional
         Contrast tables (:mod:`skinfit.contrasts`), shown with each pair's probability of direction.
+    notes : list of (where, text), optional
+        Analyses that could not be made (a population, a comparison, contrasts): listed at the
+        top of the report with the failed checks.
     analyses : callable, optional
         Called once, without arguments, while the fits' figures are drawn; returns a dict of
-        any of ``comparison``, ``population``, ``populations`` and ``contrasts``, used as those
-        arguments: a caller's comparisons and populations computed while the figures are drawn
-        (``skinfit demo``).
+        any of ``comparison``, ``population``, ``populations``, ``contrasts`` and ``notes``, used
+        as those arguments: a caller's comparisons and populations computed while the figures
+        are drawn (``skinfit demo``).
 
     Returns
     -------
@@ -724,13 +730,14 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
             (out / name).unlink(missing_ok=True)
         before, start = {p.name for p in out.iterdir()}, time.time_ns()
         index = _write_contents(items, out, figdir, title=title, comparison=comparison, population=population,
-                                populations=populations, contrasts=contrasts, designs=designs, analyses=analyses)
+                                populations=populations, contrasts=contrasts, designs=designs, analyses=analyses,
+                                notes=notes)
         _record_outputs(out, before, start)
     return index
 
 
 def _write_contents(items, out, figdir, *, title, comparison, population, populations, contrasts, designs,
-                    analyses=None):
+                    analyses=None, notes=None):
     """The report's files (see :func:`write_report`), in a folder already claimed and locked.
     The fits' figures are drawn while the sections, ``analyses`` and the figures across fits
     are computed (:func:`render_figures`' ``meanwhile``)."""
@@ -746,11 +753,12 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     from .run_labels import run_labels
 
     # two runs of one model on one dataset: named by the options that differ
-    labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items], number_identical=False)))
+    labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items])))
     wheres = {key: f"{labels[key]} on {fit.dataset_id}" for key, fit in items}
     fit_jobs = [fit_figure_jobs(fit, n, key, figdir, per_model[fit.model_id], wheres[key])
                 for n, (key, fit) in enumerate(items)]
-    given = {"comparison": comparison, "population": population, "populations": populations, "contrasts": contrasts}
+    given = {"comparison": comparison, "population": population, "populations": populations, "contrasts": contrasts,
+             "notes": notes}
     across, comparisons = [], []  # the page's sections across fits and of comparisons, made meanwhile
     stems = set()  # the file names of the comparison and contrast tables, one per table
 
@@ -773,7 +781,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             named = level_names(fit)
             shown.index = [named.get(n, n) for n in shown.index]
             where = wheres[key]
-            issues_all.extend({"status": st, "fit": key, "where": where, "text": msg} for st, msg in issues)
+            issues_all.extend({"status": st, "anchor": key, "where": where, "text": msg} for st, msg in issues)
             prov = _provenance(fit)
             sections.append({"key": key, "where": where, "converged": fit.converged, "issues": issues,
                              "prov": prov, "prov_line": _provenance_line(prov),
@@ -789,7 +797,8 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             table.to_csv(out / f"{stem}.csv")
             path = figdir / f"{stem}.png"
             entry = {"name": name or "models", "table": _table(table, table.index.name or "model"),
-                     "csv": f"{stem}.csv", "note": ranking_note(table),
+                     "csv": f"{stem}.csv", "note": ranking_note(table), "id": f"comparison-{len(comparisons) + 1}",
+                     "issues": comparison_issues(table),
                      "figure": {"file": f"figures/{path.name}", "alt": f"model comparison chart ({name or 'models'})"}}
             comparisons.append(entry)
             # drawn from the table alone: kept (in the folder and the figure store) while it is the same
@@ -808,16 +817,17 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             continue
         if "comparison" in job:  # listed at the top, the chart left out (its table stays)
             job["comparison"]["figure"] = None
-            issues_all.append({"status": "WARN", "fit": "", "where": "model comparison", "text": error})
+            issues_all.append({"status": "WARN", "anchor": job["comparison"]["id"], "where": "model comparison",
+                               "text": error})
         elif "across" in job:  # listed at the top, the figure left out
             job["across"]["figures"].remove(job["entry"])
-            issues_all.append({"status": "WARN", "fit": "", "where": f"{job['across']['model_id']} across fits",
-                               "text": error})
+            issues_all.append({"status": "WARN", "anchor": job["across"]["id"],
+                               "where": f"{job['across']['model_id']} across fits", "text": error})
         else:  # listed at the top and in its section, the figure left out
             section = sections[job["fit"]]
             section["figures"].remove(job["entry"])
             section["issues"].append(("WARN", error))
-            issues_all.append({"status": "WARN", "fit": section["key"], "where": section["where"], "text": error})
+            issues_all.append({"status": "WARN", "anchor": section["key"], "where": section["where"], "text": error})
     contrast_tables = []
     for name, table in (contrasts or {}).items():
         from .report_groups import contrast_section
@@ -827,6 +837,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
         shown.to_csv(out / f"{stem}.csv", index=False)
         top = shown.head(20).set_index("A")
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
+                                "id": f"contrasts-{len(contrast_tables) + 1}", "issues": contrast_issues(table),
                                 "table": _table(top, "A", _not_applicable(  # NaN where B's draws change sign
                                     top, ["ratio_median", "ratio_lower", "ratio_upper"]))})
 
@@ -836,12 +847,14 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
 
         from .design import design_section_html
 
-        design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id,
+        design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id, "issues": design_issues(d),
                             "html": Markup(design_section_html(d, figdir))} for d in designs]
+    issues_all.extend(_section_issues(across, comparisons, contrast_tables, design_sections, given))
     issues_all.sort(key=lambda i: i["status"] != "FAIL")  # failures first, then warnings (stable)
     n_fail = sum(i["status"] == "FAIL" for i in issues_all)
     context = {"title": title or "skinfit report", "version": __version__, "sections": sections,
                "issues": issues_all, "n_fail": n_fail, "n_warn": len(issues_all) - n_fail,
+               "checked": _checked(sections, across, comparisons, contrast_tables, design_sections),
                "comparisons": comparisons, "across": across, "contrasts": contrast_tables,
                "designs": design_sections,
                "n_fits": len(sections), "n_converged": sum(s["converged"] for s in sections),
@@ -1006,12 +1019,13 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
                           _table(pop_info["effects"].set_index(pop_info["effects"].columns[0]),
                                  pop_info["effects"].columns[0]),
                           "warnings": pop_info["warnings"], "origin": pop_info["origin"],
+                          "issues": population_issues(pop_result), "converged": bool(pop_result.converged),
                           "correlation": pop_info["correlation"], "sampler": pop_info["sampler_text"]}
         else:
             pop_tables = None
         figures = []
         entry = {"model_id": model_id, "fits": list(labelled), "figures": figures, "tables": tables,
-                 "population": pop_tables}
+                 "population": pop_tables, "id": f"across-{len(out) + 1}"}
         labels = {label: index[k] for label, (k, _) in zip(labelled, group)}
         for pname in group[0][1].group("posterior").data_vars:
             path = figdir / f"across_{safe}_{pname}.png"
@@ -1028,15 +1042,65 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
     return out
 
 
+def _section_issues(across, comparisons, contrasts, designs, given):
+    """The failed checks of the sections across fits (:mod:`skinfit.report_checks`) as issues at
+    the top of the page, each linked to its section; then the population drawn on the forest
+    plots (``population``) when it did not converge, and the ``notes`` of analyses that could
+    not be made (but those a population's warnings already state)."""
+    out = []
+    for a in across:
+        if a["population"]:
+            out += [{"status": st, "anchor": f"{a['id']}-population", "where": f"population of {a['model_id']}",
+                     "text": text} for st, text in a["population"]["issues"]]
+    out += [{"status": st, "anchor": c["id"], "where": f"model comparison: {c['name']}", "text": text}
+            for c in comparisons for st, text in c["issues"]]
+    out += [{"status": st, "anchor": c["id"], "where": f"contrasts: {c['name']}", "text": text}
+            for c in contrasts for st, text in c["issues"]]
+    out += [{"status": st, "anchor": f"{d['id']}-checks", "where": f"design: {d['name']}", "text": text}
+            for d in designs for st, text in d["issues"]]
+    drawn = given["population"]
+    if getattr(drawn, "converged", True) is False:
+        out += [{"status": st, "anchor": "", "where": "population drawn on the forest plots", "text": text}
+                for st, text in population_issues(drawn)]
+    stated = {w for a in across if a["population"] for w in a["population"]["warnings"]}
+    for where, text in given.get("notes") or ():
+        if text not in stated:
+            out.append({"status": "WARN", "anchor": "", "where": where, "text": text})
+    return out
+
+
+def _checked(sections, across, comparisons, contrasts, designs):
+    """What the report checked, in words, for a page where every check passed."""
+    n = len(sections)
+    parts = [f"{'all ' if n > 1 else ''}{n} fit{'s' if n != 1 else ''} (convergence: autocorrelation time, ESS, "
+             "R-hat over walkers; acceptance, physical support, prior bounds, fit to the data)"]
+    pops = [a["model_id"] for a in across if a["population"]]
+    if pops:
+        parts.append(f"the population{'s' if len(pops) > 1 else ''} of {', '.join(pops)} (convergence: R-hat and "
+                     "ESS of every hyper-parameter)")
+    if comparisons:
+        parts.append(f"{len(comparisons)} model comparison{'s' if len(comparisons) > 1 else ''} (the fits ranked "
+                     "converged, PSIS-LOO's Pareto k, the evidence)")
+    if contrasts:
+        parts.append(f"{len(contrasts)} contrast table{'s' if len(contrasts) > 1 else ''} (drawn from converged fits)")
+    if designs:
+        parts.append(f"{len(designs)} design{'s' if len(designs) > 1 else ''} (expected information gains "
+                     "non-negative within their error)")
+    return "; ".join(parts)
+
+
 def _summary_md(ctx):
     lines = [f"# {ctx['title']}", "",
              f"Written by skinfit {ctx['version']} from {ctx['n_fits']} saved fit(s); "
              f"{ctx['n_converged']} converged. Figures are in `figures/`; tables also as CSV.", "",
              "## Diagnostics", ""]
     if ctx["issues"]:
-        lines += [f"- **{i['status']}** {i['where']}: {i['text']}" for i in ctx["issues"]]
+        lines += [f"{ctx['n_fail']} failure{'s' if ctx['n_fail'] != 1 else ''} and {ctx['n_warn']} "
+                  f"warning{'s' if ctx['n_warn'] != 1 else ''}: read these before the numbers below.", ""]
+        lines += [f"- **{i['status']}** {i['where']}: {i['text']}"
+                  + (f" ([its section](index.html#{i['anchor']}))" if i["anchor"] else "") for i in ctx["issues"]]
     else:
-        lines.append("All fits passed their diagnostics.")
+        lines.append(f"Every check passed: {ctx['checked']}.")
     for c in ctx["comparisons"]:
         lines += ["", f"## Model comparison: {c['name']}", "", _markdown(c["table"]), "", f"CSV: `{c['csv']}`"]
         if c["note"]:
@@ -1122,30 +1186,41 @@ def _saved_populations(paths):
     return out
 
 
-def _comparisons(fits):
-    """Evidence/LOO tables for fits of different models on the same data, if skinfit.compare exists."""
+def _comparisons(fits, echo=None):
+    """Evidence/LOO tables for fits of different models (or one model under other priors, split,
+    noise or constants) on the same data, if skinfit.compare exists, one per dataset content
+    (sha256): two versions of a dataset are two tables, named by the data's sha256 where they
+    share a name. A comparison that fails is said through ``echo`` (default: on stderr)."""
+    echo = echo or (lambda message: print(message, file=sys.stderr))
     groups = {}
     for key, f in fits:
         groups.setdefault(f.attrs["dataset_sha256"], []).append((key, f))
-    if all(len({f.model_id for _, f in group}) < 2 for group in groups.values()):
+    groups = {sha: group for sha, group in groups.items() if len({_setup(f) for _, f in group}) > 1}
+    if not groups:
         return None
     try:
         from .compare import compare
     except ImportError as exc:
         if exc.name != "skinfit.compare":  # present but broken: say so, the report goes on
-            print(f"skinfit report: no model comparison ({exc})", file=sys.stderr)
+            echo(f"skinfit report: no model comparison ({exc})")
         return None
     tables = {}
-    for group in groups.values():
-        if len({f.model_id for _, f in group}) < 2:
-            continue
+    named = [group[0][1].dataset_id for group in groups.values()]
+    for (sha, group), name in zip(groups.items(), named):
+        name = name if named.count(name) == 1 else f"{name} (data {sha[:12]})"
         try:
-            tables[group[0][1].dataset_id] = compare([f for _, f in group])
+            tables[name] = compare([f for _, f in group])
         except (ValueError, RuntimeError) as exc:  # the report still shows every fit
-            print(f"skinfit report: comparison on {group[0][1].dataset_id} failed: {exc}", file=sys.stderr)
+            echo(f"skinfit report: comparison on {name} failed: {exc}")
     if not tables:
         return None
     return next(iter(tables.values())) if len(tables) == 1 else tables
+
+
+def _setup(fit):
+    """What makes a fit another model of its data: the model card and prior file, the split,
+    noise and constants (not the seed, walkers or file: runs of one model)."""
+    return fit.model_id, fit.attrs.get("priors_sha256"), fit.attrs.get("model_sha256"), fit.attrs.get("setup")
 
 
 def _cited(source):
@@ -1174,10 +1249,16 @@ def cli_report(args):
     items = _as_fits(fits)
 
     def analyses():  # while the fits' figures are drawn; the folder claimed before the population's cache is written
-        populations, contrasts = group_analyses(dict(items), echo=lambda m: print(m, file=sys.stderr),
-                                                cache_dir=Path(args.out) / ".cache",
+        notes = []
+
+        def echo(message):  # on stderr, and at the top of the report
+            print(message, file=sys.stderr)
+            notes.append(("analyses across fits", message.removeprefix("skinfit report: ")))
+
+        populations, contrasts = group_analyses(dict(items), echo=echo, cache_dir=Path(args.out) / ".cache",
                                                 saved=_saved_populations(args.runs))
-        return {"comparison": _comparisons(items), "populations": populations, "contrasts": contrasts}
+        return {"comparison": _comparisons(items, echo), "populations": populations, "contrasts": contrasts,
+                "notes": notes}
 
     index = write_report(dict(items), args.out, designs=designs, analyses=analyses)
     if getattr(args, "json", False):

@@ -15,7 +15,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["subject_label", "PopulationView", "subjects_section", "population_section", "contrast_section",
+from .report_checks import NOT_CONVERGED_ATTR
+from .run_labels import run_labels
+
+__all__ = ["subject_label", "row_labels", "PopulationView", "subjects_section", "population_section", "contrast_section",
            "population_parameters", "group_analyses", "hyperprior_table", "sampler_text"]
 
 
@@ -113,9 +116,10 @@ def subjects_section(fits):
     """Per parameter, a table of each subject's posterior (mean, sd, 94% HDI, R-hat, ESS).
 
     ``fits``: {key: Fit} of one model. Returns {"labels": {key: label}, "tables": {parameter:
-    DataFrame indexed by subject label}}.
+    DataFrame indexed by subject label}}: a row per fit, fits of one subject told apart by
+    :func:`row_labels`.
     """
-    labels = {key: subject_label(f) for key, f in fits.items()}
+    labels = row_labels(fits)
     summaries = {key: f.summary() for key, f in fits.items()}
     first = next(iter(fits.values()))
     tables = {}
@@ -132,6 +136,22 @@ def subjects_section(fits):
             frame.index.name = "subject"
             tables[name] = frame
     return {"labels": labels, "tables": tables}
+
+
+def row_labels(fits):
+    """{key: label} of ``fits`` ({key: Fit}): each fit's :func:`subject_label`; fits of one
+    label (a subject fitted twice: other seeds, priors, a split) with the options, file or
+    content that tell them apart (:func:`skinfit.run_labels.run_labels`), e.g. ``S01 [seed 2]``;
+    the same fit given twice numbered ``#2``. One row per fit, never one for two."""
+    labels = {key: subject_label(f) for key, f in fits.items()}
+    alike = {}
+    for key, label in labels.items():
+        alike.setdefault(label, []).append(key)
+    for keys in (k for k in alike.values() if len(k) > 1):
+        runs = run_labels([fits[k] for k in keys])
+        for key, run in zip(keys, runs):
+            labels[key] = f"{labels[key]} {run[len(fits[key].model_id):].strip()}".strip()
+    return labels
 
 
 def population_section(result):
@@ -245,7 +265,8 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
     pairwise contrasts between subjects of its parameters (none when a subject is fitted twice,
     which is said through ``echo``); for every fit with a parameter split by a condition, the
     contrasts between its levels. A failing step is reported through ``echo`` and left out,
-    never a partial table.
+    never a partial table. Each contrast table's ``attrs["not_converged"]`` names the fits it
+    is drawn from that did not converge (:mod:`skinfit.report_checks`).
 
     The population is the one of ``saved`` (results of ``skinfit population``, e.g. read by
     :func:`skinfit.population.load_population`) made from exactly these fits, matched by
@@ -321,10 +342,14 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
                 if echo:
                     echo(f"skinfit report: no contrasts of {name} for {model_id}: {exc}")
         if rows:
-            contrasts[f"{model_id} on {base}: between subjects"] = pd.concat(rows, ignore_index=True)
-    for key, f in fits.items():
+            table = pd.concat(rows, ignore_index=True)
+            table.attrs[NOT_CONVERGED_ATTR] = [label for label, f in group.items() if not f.converged]
+            contrasts[f"{model_id} on {base}: between subjects"] = table
+    for (key, f), label in zip(fits.items(), run_labels(fits.values())):  # two split fits: each its own table
         split = {s["base"] for s in f.attr("slots") if s["level"] is not None}
         rows = [level_contrasts(f, name).assign(parameter=name) for name in sorted(split)]
         if rows:
-            contrasts[f"{f.model_id} on {f.dataset_id}: between conditions"] = pd.concat(rows, ignore_index=True)
+            table = pd.concat(rows, ignore_index=True)
+            table.attrs[NOT_CONVERGED_ATTR] = [] if f.converged else [f"{label} on {f.dataset_id}"]
+            contrasts[f"{label} on {f.dataset_id}: between conditions"] = table
     return populations, contrasts

@@ -2,6 +2,7 @@
 shrunk beside separate estimates, contrasts with their probability of direction, conditions
 named in parameter rows, and a word when evidence and LOO disagree."""
 
+import html as html_text
 import json
 import re
 import warnings
@@ -317,3 +318,179 @@ def test_fits_given_by_names_a_file_name_cannot_tell_apart_get_their_own_keys(su
     fit = subject_fits["S01"]
     assert [k for k, _ in report._as_fits({"Zoë": fit, "Zoé": fit, "": fit, "Zo_2": fit})] == \
         ["Zo", "Zo_2", "fit", "Zo_2_2"]
+
+
+# ---- the top of the report: every failed check of every section -----------------------------
+def _top(index):
+    """The top box of a report: its class and its items as (status, anchor, text)."""
+    html = index.read_text()
+    box = re.search(r'<section id="diagnostics" class="box (\w+)">(.*?)</section>', html, re.S)
+    item = r'<li><span class="tag (\w+)">\w+</span> (?:<a href="#([^"]*)">)?(.*?)</li>'
+    items = [(st, anchor, html_text.unescape(re.sub(r"<[^>]+>", "", text)))
+             for st, anchor, text in re.findall(item, box.group(2), re.S)]
+    return box.group(1), items, html
+
+
+def _unconverged_population(fits):
+    """The population of ``fits`` run for 30 sweeps: it cannot converge (R-hat far above 1.01)."""
+    from skinfit.population import population
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return population(fits, rng=1, max_sweeps=30, burn=10, chains=4)
+
+
+def test_top_of_report_lists_a_population_that_did_not_converge(subject_fits, tmp_path, no_figures):
+    """Three converged subjects under a population that did not converge: the top of the page
+    says so, with its worst R-hat and ESS and a link to the population, and nowhere that every
+    check passed; summary.md says the same."""
+    pop = _unconverged_population(subject_fits)
+    assert not pop.converged and pop.sampler["rhat_max"] > 1.05
+    index = report.write_report(list(subject_fits.values()), tmp_path / "r", populations={"contact_area": pop})
+    kind, items, html = _top(index)
+    assert kind == "fail" and all(f.converged for f in subject_fits.values())
+    (fail,) = [i for i in items if i[0] == "FAIL"]
+    assert fail[1] and f'id="{fail[1]}"' in html and "Population" in html[html.index(f'id="{fail[1]}"'):][:200]
+    assert "population of contact_area" in fail[2] and "did not converge" in fail[2]
+    assert f"max R-hat {pop.sampler['rhat_max']:.3f}" in fail[2] and f"min ESS {pop.sampler['ess_min']:.0f}" in fail[2]
+    worst = pop.summary().dropna(subset=["r_hat"]).sort_values("r_hat").iloc[-1]
+    assert f"{worst['quantity']} of {worst['parameter']} (R-hat {worst['r_hat']:.3f}" in fail[2]
+    assert "passed every check" not in html and "Every check passed" not in html
+    md = (tmp_path / "r" / "summary.md").read_text()
+    head = md[:md.index("## contact_area across fits")]
+    assert "**FAIL** population of contact_area: the population did not converge" in head
+    assert f"(index.html#{fail[1]})" in head and "Every check passed" not in md
+
+
+def test_top_of_report_lists_every_failed_check_of_every_section_kind(subject_fits, tmp_path, no_figures):
+    """One report whose every section failed a check: a fit that did not converge, a population
+    that did not converge, a comparison that ranks that fit and whose LOO is unreliable, the
+    contrasts drawn from it, and a design whose EIG estimates lie below zero. Each is at the
+    top, a FAIL or WARN linked to a section the page has, and in summary.md."""
+    from dataclasses import replace
+
+    ds = skinfit.load_dataset("contact_area_synthetic")
+    sub = ds.subset(ds.frame["subject"].astype(str).to_numpy() == "S04", "subject=S04")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        stuck = skinfit.fit("contact_area", sub, rng=5, max_steps=300, ess_target=1e6, n_global=300)
+        fits = dict(subject_fits) | {"S04": stuck}
+        _, contrasts = group_analyses(fits)
+        design = skinfit.design("electroadhesion", {"grid": {"normal_force": {"unit": "mN", "values": [200, 2000]},
+                                                             "voltage": {"unit": "V", "values": [0, 200]}}},
+                                n=2, n_outer=60, n_inner=60, rng=1, noise_scale=0.02)
+    assert not stuck.converged
+    table = design.table.copy()
+    table.loc[[0, 1], "eig"] = -1.2  # a design whose estimate failed (as issue 39's from-a-fit design did)
+    design = replace(design, table=table)
+    comparison = pd.DataFrame({"log_z": [1278.8, 1201.8], "log_z_se": [0.01, 0.01], "pareto_k_gt_0.7": [0, 4],
+                               "method": ["bridge", "bridge"], "approximate": [False, False],
+                               "converged": [True, False]},
+                              index=pd.Index(["contact_area_hertz", "contact_area"], name="model"))
+    index = report.write_report(list(fits.values()), tmp_path / "r", populations={"contact_area":
+                                _unconverged_population(subject_fits)}, contrasts=contrasts, comparison=comparison,
+                                designs=[design])
+    kind, items, html = _top(index)
+    assert kind == "fail"
+    ids = set(re.findall(r'id="([^"]+)"', html))
+    assert all(anchor in ids for _, anchor, _ in items)  # every item links to a section of the page
+    found = {(st, text.split(":")[0]) for st, _, text in items}
+    assert ("FAIL", "contact_area on contact_area_synthetic[subject=S04]") in found  # the fit
+    assert ("FAIL", "population of contact_area") in found
+    assert ("FAIL", "model comparison") in found  # ranks a fit that did not converge
+    text = " ".join(t for _, _, t in items)
+    assert "ranks fit(s) that did not converge: contact_area" in text
+    assert "PSIS-LOO unreliable (Pareto k > 0.7) for contact_area (4 rows)" in text
+    assert "drawn from fit(s) that did not converge: S04" in text  # contrasts between subjects
+    assert ("FAIL", "design") in found and "below zero by more than 2 standard errors at 2 of 4 candidates" in text
+    md = (tmp_path / "r" / "summary.md").read_text()
+    head = md[:md.index("## Model comparison")]
+    assert head.count("**FAIL**") + head.count("**WARN**") == len(items)
+    assert "Every check passed" not in md and "Every check passed" not in html
+
+
+def test_top_of_report_says_every_check_passed_only_when_all_did(subject_fits, tmp_path, no_figures):
+    """Converged fits, a converged population, contrasts drawn from converged fits, a comparison
+    of converged fits with reliable LOO: the top says every check passed, naming what was
+    checked; summary.md says the same."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        populations, contrasts = group_analyses(dict(subject_fits))
+    assert populations["contact_area"].converged and all(f.converged for f in subject_fits.values())
+    comparison = pd.DataFrame({"log_z": [1278.8, 1201.8], "log_z_se": [0.01, 0.01], "pareto_k_gt_0.7": [0, 0],
+                               "approximate": [False, False], "converged": [True, True]},
+                              index=pd.Index(["contact_area", "contact_area_hertz"], name="model"))
+    index = report.write_report(list(subject_fits.values()), tmp_path / "r", populations=populations,
+                                contrasts=contrasts, comparison=comparison)
+    kind, items, html = _top(index)
+    assert (kind, items) == ("ok", [])
+    box = html[html.index('<section id="diagnostics"'):html.index("</section>")]
+    assert "Every check passed: all 3 fits" in box and "the population of contact_area" in box
+    assert "1 model comparison" in box and "contrast table" in box
+    assert "Every check passed: all 3 fits" in (tmp_path / "r" / "summary.md").read_text()
+
+
+# ---- two fits of one model on one dataset: one row each, told apart -------------------------
+def test_two_fits_of_one_model_on_one_dataset_keep_their_own_rows(subject_fits, tmp_path, no_figures):
+    """S01 fitted twice (seeds 10 and 99) beside S02 and S03: the tables across fits hold a row
+    for each fit, labelled by what differs (the seed), each with its own fit's numbers; the
+    population, which would count S01 twice, is not made, and the top of the page says why."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        again = skinfit.fit("contact_area", subject_fits["S01"].posterior.dataset, rng=99, max_steps=600,
+                            ess_target=100, n_global=300)
+        populations, contrasts = group_analyses({"a": subject_fits["S01"], "b": again, "c": subject_fits["S02"],
+                                                 "d": subject_fits["S03"]}, echo=lambda m: None)
+    assert populations == {}
+    report.write_report([*subject_fits.values(), again], tmp_path / "r")
+    for name in ("m0", "beta_z0"):
+        table = pd.read_csv(tmp_path / "r" / f"subjects_contact_area_{name}.csv", index_col="subject")
+        assert sorted(table.index) == ["S01 [seed 10]", "S01 [seed 99]", "S02", "S03"]
+        assert table.loc["S01 [seed 10]", "mean"] == pytest.approx(subject_fits["S01"].summary().loc[name, "mean"])
+        assert table.loc["S01 [seed 99]", "mean"] == pytest.approx(again.summary().loc[name, "mean"])
+    index = report.write_report([*subject_fits.values(), again], tmp_path / "r",
+                                notes=[("analyses across fits", "S01 fitted more than once")])
+    kind, items, _ = _top(index)
+    assert ("WARN", "", "analyses across fits: S01 fitted more than once") in items
+
+
+def test_fits_with_the_same_options_are_told_apart_by_their_file_then_their_content(subject_fits, tmp_path):
+    """Two files of one fit's content: labelled by the shortest part of their paths that differs;
+    two fits in memory with the same options but other draws (another ESS target): by their
+    content's sha256; the same fit twice: numbered."""
+    from skinfit.compare import compare
+    from skinfit.run_labels import run_labels
+
+    fit = subject_fits["S01"]
+    for folder in ("a", "b"):
+        fit.save(tmp_path / folder / "run" / "fit.nc")
+    loaded = [skinfit.load_fit(tmp_path / folder / "run" / "fit.nc") for folder in ("a", "b")]
+    assert run_labels(loaded) == ["contact_area [file a/run/fit.nc]", "contact_area [file b/run/fit.nc]"]
+    keys = [k for k, _ in report._as_fits(loaded)]
+    assert len(set(keys)) == 2 and "a_run" in keys[0] and "b_run" in keys[1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        longer = skinfit.fit("contact_area", fit.posterior.dataset, rng=10, max_steps=600, ess_target=300,
+                             n_global=300)
+    assert json.loads(longer.attrs["setup"]) == json.loads(fit.attrs["setup"]) and longer.attrs["seed"] == 10
+    hashes = [fit.content_hash(), longer.content_hash()]
+    assert run_labels([fit, longer]) == [f"contact_area [content {h[:8]}]" for h in hashes]
+    assert run_labels([fit, fit]) == ["contact_area", "contact_area #2"]
+    assert list(compare({"mine": fit, "theirs": longer}).index) in (["mine", "theirs"], ["theirs", "mine"])
+
+
+def test_two_split_fits_of_one_dataset_keep_their_own_contrasts(tmp_path):
+    """Two fits of electroadhesion with alpha split by voltage, differing in their seed: the
+    contrasts between voltages of each are their own table, titled by the seed (one title for
+    both had kept only the second)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        split = skinfit.fit("electroadhesion", "electroadhesion_synthetic", split={"alpha": "voltage"}, rng=1,
+                            max_steps=300, n_global=300)
+    tree = split.partial_tree.copy()
+    tree.attrs["seed"] = 2
+    other = skinfit.Fit(tree)
+    _, contrasts = group_analyses({"one": split, "two": other})
+    titles = [t for t in contrasts if "between conditions" in t]
+    assert titles == ["electroadhesion [seed 1] on electroadhesion_synthetic: between conditions",
+                      "electroadhesion [seed 2] on electroadhesion_synthetic: between conditions"]
