@@ -31,7 +31,7 @@ sys.path.insert(0, str(HERE.parent / "tests"))
 
 from popdata import write_population  # noqa: E402
 
-from skinfit.campaign import run_campaign  # noqa: E402
+from skinfit.apps.campaign import run_campaign  # noqa: E402
 
 
 def main():

@@ -22,7 +22,7 @@ from pathlib import Path
 
 CHILD = r'''
 import json, resource, sys, time
-import skinfit.demo as demo
+import skinfit.apps.demo as demo
 
 log, runs, report = sys.argv[1:4]
 fit_one, draw_one = demo._run_one, demo._draw_one

@@ -38,14 +38,15 @@ import numpy as np
 import pandas as pd
 
 import skinfit
-from skinfit import paths, registry
-from skinfit.data import Dataset
-from skinfit.units import to_si
+from skinfit.io import paths
+from skinfit.io import registry
+from skinfit.io.data import Dataset
+from skinfit.io.units import to_si
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import RESULTS, machine_info, machine_text  # noqa: E402
 
-design_mod = importlib.import_module("skinfit.design")  # the module (skinfit.design is the function)
+design_mod = importlib.import_module("skinfit.analysis.design")  # the module (skinfit.design is the function)
 SIGMA = 0.02
 GRID = {"grid": {"normal_force": {"unit": "mN", "from": 200, "to": 2000, "num": 10},
                  "voltage": {"unit": "V", "from": 0, "to": 200, "num": 9}}}

@@ -37,9 +37,9 @@ def main():
 
     from matplotlib.figure import Figure
 
-    import skinfit.report as report
-    from skinfit import plots
-    from skinfit.demo import run_demo
+    import skinfit.report.html as report
+    from skinfit.plots import figures as plots
+    from skinfit.apps.demo import run_demo
 
     rows = []
     pdf_time = [0.0]

@@ -4,7 +4,7 @@
    the 13 shipped subjects with 4 and 8 population parameters, and 13, 50, 100 subjects
    simulated from a known population (below) with all 10 sampled parameters (the 8 model
    parameters and the 2 noise scales).  Per size: wall and CPU seconds of
-   ``skinfit.population.population`` on saved fits (loading the fits included), sweeps,
+   ``skinfit.analysis.population.population.population`` on saved fits (loading the fits included), sweeps,
    worst R-hat and ESS over the hyper-parameters.  ``--reweight`` also times the importance
    reweighting path on 13 x 4.
 2. Coverage: 20 simulated Coulomb populations of 13 subjects (tests/popsim.py, log-normal,
@@ -30,9 +30,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from skinfit.groups import fit_by  # noqa: E402
+from skinfit.analysis.groups import fit_by  # noqa: E402
 from skinfit.physics.contact_area import contact_area  # noqa: E402
-from skinfit.population import PopulationWarning, load_run, population  # noqa: E402
+from skinfit.analysis.population.population import PopulationWarning, load_run, population  # noqa: E402
 
 # the simulated population of the 50/100-subject sizes: log-normal (median, sd of log) for the
 # positive parameters, normal (mean, sd) for the slopes with actuation force

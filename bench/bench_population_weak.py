@@ -19,8 +19,8 @@ import time
 import warnings
 from pathlib import Path
 
-from skinfit.groups import fit_by
-from skinfit.population import load_run, population
+from skinfit.analysis.groups import fit_by
+from skinfit.analysis.population.population import load_run, population
 
 ROOT = Path(__file__).resolve().parents[1]
 

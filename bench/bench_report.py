@@ -13,7 +13,7 @@ with the store kept (figures copied from it); again into the same folder (everyt
 bench/results/report_commands.md with the machine and its load: wall, and user + sys CPU of
 the process and its children.
 
-``--report-only`` times :func:`skinfit.report.write_report` alone, in this process, on the
+``--report-only`` times :func:`skinfit.report.html.write_report` alone, in this process, on the
 demo's saved fits (made once under ``--work`` when absent, not timed): the demo is run with
 every fit reused and its ``write_report`` call timed (wall, CPU of this process and of the
 figure workers), into a new report folder (every figure drawn) and again into the same
@@ -59,8 +59,8 @@ def _report_only(work, profile):
     import resource
 
     os.environ["SKINFIT_FIGURE_STORE"] = "off"  # this mode measures drawing: no figure copied from the store
-    import skinfit.report as report
-    from skinfit.demo import run_demo
+    import skinfit.report.html as report
+    from skinfit.apps.demo import run_demo
 
     runs = work / "runs"
     if not (runs / "electroadhesion_synthetic" / "electroadhesion" / "fit.nc").exists():

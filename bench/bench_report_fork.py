@@ -4,7 +4,7 @@ or a Dask client does) and from one that does not, for two checkouts alternately
     .venv/bin/python bench/bench_report_fork.py --fits A/fit.nc B/fit.nc --old OLD_SRC [--repeats 3]
 
 Each timing is a new interpreter that loads the fits, optionally starts one idle thread, and
-times :func:`skinfit.report.write_report` into a new folder with the figure store off (every
+times :func:`skinfit.report.html.write_report` into a new folder with the figure store off (every
 figure drawn). ``OLD_SRC`` is a folder holding an earlier ``skinfit`` package (e.g. from ``git
 archive``), put first on ``PYTHONPATH``; the new code is this checkout's. Printed as a markdown
 table (bench/results/report_commands.md).
@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = """
 import sys, threading, time, warnings
 import skinfit
-from skinfit.report import write_report
+from skinfit.report.html import write_report
 fits = [skinfit.load_fit(p) for p in sys.argv[3:]]
 if sys.argv[1] == "thread":
     stop = threading.Event()

@@ -17,7 +17,7 @@ import numpy as np
 import skinfit
 from common import RESULTS, diagnostics, machine_info, machine_text, throughput
 MODEL, DATA, PRIORS = "electroadhesion", "electroadhesion_synthetic", "electroadhesion"
-from skinfit.data import Dataset
+from skinfit.io.data import Dataset
 from skinfit.posterior import Posterior
 
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 import skinfit
-from skinfit.data import load_dataset
-from skinfit.demo import _select, demo_plan
+from skinfit.io.data import load_dataset
+from skinfit.apps.demo import _select, demo_plan
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine_info  # noqa: E402
@@ -37,7 +37,7 @@ PROBS = (0.05, 0.5, 0.95)
 
 def _slot_draws(fit):
     """(name, (walkers, draws) array) of every sampled scalar, in slot order."""
-    from skinfit.fit import _slot_values
+    from skinfit.results.fit import _slot_values
 
     ds = fit.group("posterior")
     shape = (ds.sizes["chain"], ds.sizes["draw"])

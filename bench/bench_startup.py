@@ -41,7 +41,7 @@ def commands(tmp, source=None):
     fit = ["fit", "electroadhesion", "electroadhesion_synthetic", "--out", str(Path(tmp) / "run"), "--seed", "1",
            "--quiet", "--overwrite"]  # repeated into one folder: each run replaces the last
     older = [*fit[:3], "--out", str(Path(tmp) / "run_older"), *fit[5:-1]]  # code from before --overwrite
-    cli = "from skinfit.cli import main; sys.exit(main({!r}))"
+    cli = "from skinfit.apps.cli import main; sys.exit(main({!r}))"
     return [
         ("python -c pass", [PY, "-c", "pass"], None),
         ("import skinfit", [PY, "-c", "import skinfit"], "< 1 s"),

@@ -24,9 +24,9 @@ import emcee
 import numpy as np
 
 import skinfit
-from skinfit.fit import default_walkers, start
+from skinfit.results.fit import default_walkers, start
 from skinfit.posterior import Posterior
-from skinfit.sampling import _adapt, adaptive_moves, independence_move
+from skinfit.inference.sampling import _adapt, adaptive_moves, independence_move
 
 ESS_TARGET = 400
 RHAT_MAX = 1.01
@@ -165,7 +165,7 @@ def run_skinfit(model, dataset, priors, seed):
             f"MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, "
             f"result tree {t['tree_s']:.2f} s, pointwise + predictive on first use {t['pointwise_s']:.2f} s "
             f"({mem_pointwise.mb:.0f} MB)")
-    return Result("skinfit.fit", wall, ess, rhat, evals, mem.mb, note,
+    return Result("skinfit.results.fit", wall, ess, rhat, evals, mem.mb, note,
                   extra={"fit": fit, "timings": t, "sampler": s, "pointwise_s": t["pointwise_s"],
                          "pointwise_mb": mem_pointwise.mb})
 
@@ -174,7 +174,7 @@ def run_bare_emcee(model, dataset, priors, seed, sampler_record):
     """The chain ``skinfit.fit`` ran, by emcee alone: ``emcee.EnsembleSampler(vectorize=True)``
     over skinfit's own log-density ``post(z)``, from the same start (MAP, Laplace proposal,
     walkers, seed), with skinfit's moves, refitting the proposal at the steps the fit's record
-    says (``skinfit.sampling._adapt``), to the fit's step count: the identical chain, hence the
+    says (``skinfit.inference.sampling._adapt``), to the fit's step count: the identical chain, hence the
     same ESS, without skinfit's convergence checks, guard rails and result tree.  Timed like the
     fit (from loaded model, dataset and priors: the Posterior is built inside the timing).
     Returns the wall time split into MAP + start and sampling; ESS/R-hat of the same kept draws

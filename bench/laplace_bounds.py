@@ -2,7 +2,7 @@
 
     python bench/laplace_bounds.py --work /tmp/laplace-bench [--seed 1] [--models electroadhesion_coulomb ...]
 
-Fits each model of the demo plan (``skinfit.demo.demo_plan``: its seeds, rows and splits) into
+Fits each model of the demo plan (``skinfit.apps.demo.demo_plan``: its seeds, rows and splits) into
 ``--work`` (reused when present), then computes log Z by bridge sampling (3 repeats) and by
 Laplace (its Gaussian integrated inside the prior bounds, checked against the posterior draws),
 or Laplace's one-line refusal.  Per fit: both values, their difference, the draws' bracket on
@@ -22,7 +22,7 @@ import numpy as np
 
 import skinfit
 from skinfit import __version__
-from skinfit.demo import demo_plan
+from skinfit.apps.demo import demo_plan
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -39,9 +39,9 @@ from scipy import stats
 
 import skinfit
 from skinfit import __version__
-from skinfit.guardrails import BOUND_ALPHA
-from skinfit.misfit import ALPHA, check_fit, simulated_check
-from skinfit.models import load_model
+from skinfit.inference.guardrails import BOUND_ALPHA
+from skinfit.analysis.misfit import ALPHA, check_fit, simulated_check
+from skinfit.io.models import load_model
 from skinfit.posterior import Posterior
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -125,7 +125,7 @@ def _autocorrelated(seed, phi, n):
 
 
 def _check_cost(rows=(1_000, 10_000, 100_000), draws=2000):
-    """Seconds of :func:`skinfit.misfit.check_fit` alone (its predictions and statistics, no
+    """Seconds of :func:`skinfit.analysis.misfit.check_fit` alone (its predictions and statistics, no
     PSIS) on series of ``rows`` rows with a time column (m = 6 checks, 900 draws)."""
     model = skinfit.load_model("electroadhesion_empirical")
     out = []
@@ -229,7 +229,7 @@ answer.  `rms_z_force_at_1N`: the root mean square over the data sets of (poster
 truth) / posterior sd of the friction force at 1 N (b + d): about 1 for a calibrated posterior.
 
 Before the fix (issue 39, on commit ef868ee): 15 of 100 electroadhesion fits of data simulated
-from it (seeds 39000-39099 of skinfit.misfit.simulated_check) carried the bound warning, tau0 in
+from it (seeds 39000-39099 of skinfit.analysis.misfit.simulated_check) carried the bound warning, tau0 in
 13 (the issue: 16 of 100, tau0 in 12); the power law fitted to Coulomb data at 9 voltages said
 "no misfit found" at d_air 5, 8, 12 and 20 um (sigma 12.9, 5.5, 2.6 and 1.3 x the truth), where a
 one-way ANOVA of its residuals by voltage gives p = 1e-91, 1e-83, 7e-62 and 8e-21; a 10 000-row

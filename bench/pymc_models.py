@@ -298,8 +298,8 @@ def build_pymc(post, rows="all"):
 
 def _points(post, n, rng):
     """n natural-parameter points: half prior draws with a finite log density, half around the
-    MAP (skinfit.optimize.find_map) jittered by 1% in the sampling coordinates."""
-    from skinfit.optimize import find_map
+    MAP (skinfit.inference.optimize.find_map) jittered by 1% in the sampling coordinates."""
+    from skinfit.inference.optimize import find_map
 
     draws = post.sample_prior(200 * n, rng)
     draws = draws[np.isfinite(post.log_density(draws))][: n // 2]

@@ -4,7 +4,7 @@
     python bench/recovery_table.py runs/demo
 
 For each dataset, the fit of the model that generated it (as the demo fits it: rows and
-splits of ``skinfit.demo.DEMO_OPTIONS``): per parameter with a recorded truth, the truth,
+splits of ``skinfit.apps.demo.DEMO_OPTIONS``): per parameter with a recorded truth, the truth,
 posterior mean, central 95% interval and whether the truth is inside; and per fit the wall
 time, minimum bulk ESS and maximum R-hat. Writes ``bench/results/recovery.md``.
 """
@@ -45,7 +45,7 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", help="directory written by `skinfit demo --out`")
     args = p.parse_args(argv)
-    from skinfit.demo import DEMO_OPTIONS
+    from skinfit.apps.demo import DEMO_OPTIONS
 
     lines = [f"# Recovery on the shipped simulated datasets (issue 3)\n\nskinfit {__version__}; "
              f"`python bench/recovery_table.py {' '.join(argv or sys.argv[1:])}` on the fits of `skinfit demo` "

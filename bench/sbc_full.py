@@ -21,7 +21,7 @@ import warnings
 from pathlib import Path
 
 from skinfit import __version__
-from skinfit.sbc import markdown_table, run_sbc, write_sbc
+from skinfit.analysis.sbc import markdown_table, run_sbc, write_sbc
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: model -> rows of its design used (fewer rows: cheaper fits, wider posteriors; the design's

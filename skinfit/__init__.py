@@ -35,7 +35,7 @@ class _Package(types.ModuleType):
     ``skinfit.fit``, ``skinfit.compare`` and ``skinfit.evidence`` are functions named like
     their submodules; importing a submodule sets the package attribute of that name, which
     here would hide the function, so that assignment is skipped (``sys.modules`` still holds
-    the submodule, and ``from skinfit.fit import ...`` works as before).
+    the submodule, and ``from skinfit.results.fit import ...`` works as before).
     """
 
     def __getattr__(self, name):

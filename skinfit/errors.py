@@ -61,7 +61,7 @@ class InputTypeError(InputError, TypeError):
 
 
 class ForwardError(InputError):
-    """A model's forward function broke its contract (skinfit.registry.ROLES): it raised,
+    """A model's forward function broke its contract (skinfit.io.registry.ROLES): it raised,
     returned something other than ``(dict of (k, n) real arrays, bool (k, n) ok)``, returned
     NaN or inf at a point it marks valid, or is not vectorised over parameter draws.  ``where``
     is the model card, ``field`` its ``forward`` key."""
@@ -77,7 +77,7 @@ class SupportWarning(UserWarning):
 
 class IntegrityWarning(UserWarning):
     """A saved result read without a check for damage: written before skinfit recorded checksums
-    (:mod:`skinfit.integrity`)."""
+    (:mod:`skinfit.io.integrity`)."""
 
 
 class MissingDependency(Portable, ImportError):

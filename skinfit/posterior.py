@@ -10,16 +10,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .labels import noise_suffix
-from .units import to_si
+from skinfit.io.labels import noise_suffix
+from skinfit.io.units import to_si
 
-from .arguments import check_mapping, shown
-from .errors import InputError, InputTypeError
-from .data import check_units
-from .forward_check import check_forward, check_quantiles, forward_error
-from .models import NOISE_MODELS, resolve_forward as _resolve
-from .priors import check_priors_for
-from .priors import _LOGPDF
+from skinfit.io.arguments import check_mapping, shown
+from skinfit.errors import InputError, InputTypeError
+from skinfit.io.data import check_units
+from skinfit.io.forward_check import check_forward, check_quantiles, forward_error
+from skinfit.io.models import NOISE_MODELS, resolve_forward as _resolve
+from skinfit.io.priors import check_priors_for
+from skinfit.io.priors import _LOGPDF
 
 __all__ = ["Posterior", "Slot", "noise_parameter_names"]
 
@@ -144,7 +144,7 @@ class Posterior:
                 raise InputError(where, f"unknown noise model {kind!r} for {o} (expected one of "
                                  f"{', '.join(NOISE_MODELS)})", field="noise")
         self.noise = noise
-        from .models import check_constant
+        from skinfit.io.models import check_constant
 
         check_mapping(constants, where, "constants", "a mapping constant name -> number")
         self.constants = {**model.constants, **{k: check_constant(k, v, where) if k in model.constants else v

@@ -24,7 +24,7 @@ def ea_fit():
 def no_figures(monkeypatch):
     """Reports written without drawing their figures (each figure job reported as drawn), for
     tests of what a report does with its folder, tables and text."""
-    from skinfit import report
+    from skinfit.report import html as report
 
     def drawn(fits, jobs, figdir, workers=None, meanwhile=None):
         return [None] * (len(jobs) + len(meanwhile() if meanwhile is not None else []))
@@ -50,7 +50,7 @@ def refused(capsys):
     """``refused(argv, where, message)``: the CLI run on ``argv`` exits 2 with exactly the one
     line ``skinfit: error: WHERE: MESSAGE`` on stderr, and not a byte of a file under ``where``
     changed (nor a file added or removed)."""
-    from skinfit.cli import main
+    from skinfit.apps.cli import main
 
     def check(argv, where, message):
         files = {p: p.read_bytes() for p in where.rglob("*") if p.is_file()}

@@ -3,8 +3,8 @@ on first use, against numbers from outside the code that made them."""
 
 import numpy as np
 
-from skinfit.evidence import posterior_draws
-from skinfit.labels import noise_suffix
+from skinfit.analysis.evidence import posterior_draws
+from skinfit.io.labels import noise_suffix
 
 
 def check_pointwise_groups(fit):

@@ -15,12 +15,12 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from skinfit.data import Column, Dataset
-from skinfit.hierarchical import NU_HYPER
-from skinfit.models import load_model
-from skinfit.population import DrawsFit, _prior_moments
+from skinfit.io.data import Column, Dataset
+from skinfit.analysis.population.hierarchical import NU_HYPER
+from skinfit.io.models import load_model
+from skinfit.analysis.population.population import DrawsFit, _prior_moments
 from skinfit.posterior import Posterior
-from skinfit.priors import load_priors
+from skinfit.io.priors import load_priors
 
 MODEL = "electroadhesion_coulomb"
 LEVELS = (0.3, 1.0)  # normal forces [N]
@@ -72,7 +72,7 @@ def _importance_draws(post, rng, n_draws, n_prior):
     """Posterior draws by two rounds of importance sampling: from the prior, then from a
     Student-t (5 d.o.f., covariance x2) fitted to the weighted first round (sampling
     coordinates); resampled to ``n_draws``."""
-    from skinfit.proposal import MixtureT
+    from skinfit.inference.proposal import MixtureT
 
     z = post.to_z(post.sample_prior(n_prior, rng))
     logw = post(z) - _prior_logpdf_z(post, z)
@@ -111,7 +111,7 @@ def run_sbc(family, n_sims, seed, *, n_subjects=8, presses=2, ess_target=100, rh
 
     from scipy import stats
 
-    from skinfit.population import population
+    from skinfit.analysis.population.population import population
 
     rng = np.random.default_rng(seed)
     ranks = {"mu": [], "tau": [], "tau_control": []}

@@ -28,7 +28,7 @@ def test_example_report_renders_without_overflow_broken_images_or_errors(tmp_pat
 
 
 def test_a_new_report_renders_without_overflow_broken_images_or_errors(ea_fit, tmp_path):
-    from skinfit import report
+    from skinfit.report import html as report
 
     report.write_report([ea_fit], tmp_path / "report", title="one fit")
     _check(inspect(tmp_path / "report", tmp_path / "probe"))

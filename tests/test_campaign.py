@@ -15,9 +15,9 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.campaign import load_campaign, run_campaign
-from skinfit.cli import main
-from skinfit.groups import derive_seed
+from skinfit.apps.campaign import load_campaign, run_campaign
+from skinfit.apps.cli import main
+from skinfit.analysis.groups import derive_seed
 
 DASK = Path(sys.executable).parent / "dask"
 
@@ -122,7 +122,7 @@ def test_kill_midway_then_restart_runs_only_unfinished(tmp_path):
     data, _ = write_population(tmp_path, n_subjects=4)
     path = _campaign(tmp_path, data.name, "killed", seed=8)
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "skinfit.cli", "campaign", str(path), "--workers", "1"],
+    proc = subprocess.Popen([sys.executable, "-m", "skinfit.apps.cli", "campaign", str(path), "--workers", "1"],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.time() + 180
@@ -198,7 +198,7 @@ def test_edited_data_makes_the_fit_run_again(tmp_path):
 
 def test_another_sampler_makes_the_fit_run_again(tmp_path, monkeypatch):
     """A finished fit is not reused by a skinfit whose sampler differs (same seed, other samples)."""
-    from skinfit import sampling
+    from skinfit.inference import sampling
 
     data, _ = write_population(tmp_path, n_subjects=1)
     path = _campaign(tmp_path, data.name, "sampler")
@@ -294,7 +294,7 @@ def test_class2_a_bad_dataset_in_a_worker_reports_its_message_and_the_others_com
 
 
 def test_class2_two_campaigns_differing_in_one_option_never_share_dask_keys(tmp_path):
-    from skinfit.campaign import task_key
+    from skinfit.apps.campaign import task_key
 
     data, _ = write_population(tmp_path, n_subjects=2)
     a = load_campaign(_campaign(tmp_path, data.name, "a"))
@@ -309,7 +309,7 @@ def test_class2_two_campaigns_differing_in_one_option_never_share_dask_keys(tmp_
 
 
 def test_class2_a_campaign_refuses_an_out_in_use(tmp_path):
-    from skinfit.checkpoint import CheckpointLock
+    from skinfit.inference.checkpoint import CheckpointLock
 
     data, _ = write_population(tmp_path, n_subjects=1)
     path = _campaign(tmp_path, data.name, "busy")
@@ -326,7 +326,7 @@ def test_class1_a_campaign_never_drops_results_from_their_index(local_run, tmp_p
     or one extending it, may run there. `skinfit fit --out` refuses a campaign's folder too."""
     import json
 
-    from skinfit.campaign import check_campaign_out
+    from skinfit.apps.campaign import check_campaign_out
 
     folder, data, _, _ = local_run
     out = folder / "local"
@@ -375,7 +375,7 @@ def test_class4_ids_with_path_syntax_are_refused_before_any_write(tmp_path):
     model = tmp_path / "m.toml"
     model.write_text((Path(skinfit.__file__).resolve().parents[1] / "models" / "electroadhesion_coulomb.toml")
                      .read_text().replace('id = "electroadhesion_coulomb"', 'id = "../../m"'))
-    # refused when the card is read (an id is a name: skinfit.models.check_id) or, for an id
+    # refused when the card is read (an id is a name: skinfit.io.models.check_id) or, for an id
     # that got past it, by the campaign's own write-side check; either way the id is named
     cases = [('["electroadhesion_coulomb"]', "../../x", r"'\.\./\.\./x'"),
              ('["electroadhesion_coulomb"]', "/tmp/abs", r"'/tmp/abs'"),
@@ -393,7 +393,7 @@ def test_class4_ids_with_path_syntax_are_refused_before_any_write(tmp_path):
 
 
 def test_class4_inside_refuses_paths_that_leave_out(tmp_path):
-    from skinfit.groups import inside
+    from skinfit.analysis.groups import inside
 
     assert inside(tmp_path / "out", tmp_path / "out" / "m" / "d" / "fit.nc") == (tmp_path / "out/m/d/fit.nc").resolve()
     for bad in ("../x", "m/../../x", "/etc/x"):
@@ -406,9 +406,9 @@ def test_class4_inside_refuses_paths_that_leave_out(tmp_path):
 
 
 def test_class4_write_side_check_refuses_ids_the_card_reader_would_pass_on():
-    """The campaign's own guard (skinfit.groups.check_name) refuses path syntax even when an id
+    """The campaign's own guard (skinfit.analysis.groups.check_name) refuses path syntax even when an id
     reaches it by another route than a card (e.g. a Dataset built in Python)."""
-    from skinfit.groups import check_name
+    from skinfit.analysis.groups import check_name
 
     assert check_name("electroadhesion_synthetic", "dataset id", "c.toml") == "electroadhesion_synthetic"
     for bad in ("../../x", "/tmp/abs", "a/b", "..", ".hidden", "a b", ""):

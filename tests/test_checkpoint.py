@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.checkpoint import Checkpoint, load_checkpoint
+from skinfit.inference.checkpoint import Checkpoint, load_checkpoint
 from skinfit.errors import InputError
-from skinfit.fit import as_generator
-from skinfit.optimize import MAPResult, laplace_covariance
+from skinfit.results.fit import as_generator
+from skinfit.inference.optimize import MAPResult, laplace_covariance
 from skinfit.posterior import Posterior
-from skinfit.proposal import MixtureT
-from skinfit.sampling import check_points, initial_ball, run_emcee
+from skinfit.inference.proposal import MixtureT
+from skinfit.inference.sampling import check_points, initial_ball, run_emcee
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL, DATA = "electroadhesion_coulomb", "electroadhesion_synthetic"
@@ -226,7 +226,7 @@ def test_killed_save_leaves_old_or_new_file(reference, tmp_path, delay):
 
 # ---- issue 21, class 2: killed saves leave no file behind; one writer per folder --------------------
 def test_class2_stale_temp_files_removed_only_when_their_writer_is_dead(tmp_path):
-    from skinfit.checkpoint import _host, remove_stale_temps, temp_file
+    from skinfit.inference.checkpoint import _host, remove_stale_temps, temp_file
 
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
@@ -251,9 +251,9 @@ def test_class2_stale_temp_files_removed_only_when_their_writer_is_dead(tmp_path
 
 
 def test_class2_lock_names_the_pid_holding_the_folder(tmp_path):
-    from skinfit.checkpoint import CheckpointLock
+    from skinfit.inference.checkpoint import CheckpointLock
 
-    code = ("import sys, time; from skinfit.checkpoint import CheckpointLock\n"
+    code = ("import sys, time; from skinfit.inference.checkpoint import CheckpointLock\n"
             f"with CheckpointLock({str(tmp_path / 'checkpoint.h5')!r}):\n"
             "    print('held', flush=True); time.sleep(60)\n")
     holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)

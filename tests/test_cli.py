@@ -6,7 +6,7 @@ import warnings
 import pytest
 
 import skinfit
-from skinfit.cli import main
+from skinfit.apps.cli import main
 
 
 def test_listings(capsys):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.cli import main
+from skinfit.apps.cli import main
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,8 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.contrasts import contrast, fit_contrasts, hdi, level_contrasts
-from skinfit.groups import fit_by, load_groups
+from skinfit.analysis.contrasts import contrast, fit_contrasts, hdi, level_contrasts
+from skinfit.analysis.groups import fit_by, load_groups
 
 TRUTHS = {"S01": 0.40, "S02": 0.55, "S03": 0.56}
 

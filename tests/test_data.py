@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.data import load_dataset
+from skinfit.io.data import load_dataset
 
 SHIPPED = Path(skinfit.__file__).resolve().parents[1] / "datasets" / "electroadhesion_synthetic"
 

@@ -15,9 +15,9 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.data import from_frame, load_dataset, write_card
+from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.errors import InputError
-from skinfit.units import parse_unit, si_unit
+from skinfit.io.units import parse_unit, si_unit
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 EA = ROOT / "datasets" / "electroadhesion_synthetic"
@@ -157,7 +157,7 @@ def test_units_converted_to_si_by_hand_factors(unit, factor):
 
 
 def test_coherent_si_units_read_without_pint_agree_with_pint():
-    from skinfit import units
+    from skinfit.io import units
 
     ureg = units.registry()
     for sym in units._SI:
@@ -237,7 +237,7 @@ def test_written_card_reloads_the_same_data_and_detects_a_changed_file(tmp_path)
 
 
 def test_cli_fits_a_csv_without_a_card_and_writes_one_that_reproduces_the_fit(tmp_path, capsys):
-    from skinfit.cli import main
+    from skinfit.apps.cli import main
 
     csv = _ea_csv(tmp_path)
     assert main(["fit", "electroadhesion", str(csv), "--out", str(tmp_path / "a"), "--seed", "5", "--quiet"]) == 0
@@ -257,7 +257,7 @@ def test_cli_fits_a_csv_without_a_card_and_writes_one_that_reproduces_the_fit(tm
 
 
 def test_cli_by_group_on_a_csv_without_a_card_writes_its_card(tmp_path, capsys):
-    from skinfit.cli import main
+    from skinfit.apps.cli import main
 
     csv = _ea_csv(tmp_path)
     assert main(["fit", "electroadhesion", str(csv), "--by", "subject", "--out", str(tmp_path / "g"), "--seed", "2",

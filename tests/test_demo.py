@@ -5,8 +5,8 @@ import json
 import pytest
 
 import skinfit
-from skinfit.cli import main
-from skinfit.demo import demo_plan
+from skinfit.apps.cli import main
+from skinfit.apps.demo import demo_plan
 
 
 def test_plan_covers_every_shipped_dataset_with_its_variants():
@@ -27,7 +27,7 @@ def test_plan_covers_every_shipped_dataset_with_its_variants():
 
 _REUSED_DEMO = """
 import json, sys
-from skinfit.cli import main
+from skinfit.apps.cli import main
 
 assert main(["demo", "--out", sys.argv[1], "--dataset", "electroadhesion_synthetic"]) == 0
 heavy = ("emcee", "scipy", "arviz_stats", "arviz_base", "pint", "nlopt")
@@ -36,7 +36,7 @@ print(json.dumps(sorted(m for m in sys.modules if m in heavy or m.split(".")[0] 
 
 
 def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
-    from skinfit import report as report_module
+    from skinfit.report import html as report_module
 
     drawn = []  # per-fit figures the report process draws itself (one figure worker: in this process)
     render = report_module._render_one
@@ -60,7 +60,7 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
     assert all(f.with_suffix(".pdf").stat().st_size > 0 for f in figures)
     plan = json.loads((report / "demo_plan.json").read_text())
     assert [p["model"] for p in plan] == ["electroadhesion", "electroadhesion_coulomb", "electroadhesion_empirical"]
-    from skinfit.compare import loo
+    from skinfit.analysis.compare import loo
 
     for p in plan:  # every fit converged and carries its evidence and LOO for later reports
         fit = skinfit.load_fit(out / p["dataset"] / p["model"] / "fit.nc")
@@ -84,7 +84,8 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
     assert run.returncode == 0, run.stderr[-2000:]
     assert "(3 already done" in run.stdout and json.loads(run.stdout.strip().splitlines()[-1]) == []
     # ... but not under another sampler (the same seed would give other samples)
-    from skinfit import demo, sampling
+    from skinfit.apps import demo
+    from skinfit.inference import sampling
 
     monkeypatch.setattr(sampling, "TAU_KEEP", 5.0)
     item = next(p for p in plan if p["model"] == "electroadhesion")
@@ -93,7 +94,7 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
 
 _SPAWNED_DEMO = """
 import multiprocessing, sys
-from skinfit.cli import main
+from skinfit.apps.cli import main
 if __name__ == "__main__":
     multiprocessing.set_start_method(sys.argv[1], force=True)
     sys.exit(main(["--path", sys.argv[2], "demo", "--dataset", "electroadhesion_synthetic", "--jobs", "2",
@@ -114,7 +115,7 @@ def test_demo_workers_started_by_spawn_fit_the_data_found_through_path(tmp_path)
     shipped = skinfit.load_dataset("electroadhesion_synthetic")
     user = tmp_path / "mine" / "datasets" / "electroadhesion_synthetic"
     user.mkdir(parents=True)
-    card = skinfit.paths.locate("datasets", "electroadhesion_synthetic")
+    card = skinfit.io.paths.locate("datasets", "electroadhesion_synthetic")
     shutil.copy(card, user / "dataset.toml")
     lines = (card.parent / "data.csv").read_text().splitlines()
     (user / "data.csv").write_text("\n".join(lines[:121]) + "\n")  # the header and the first 120 rows
@@ -132,7 +133,7 @@ def test_demo_workers_started_by_spawn_fit_the_data_found_through_path(tmp_path)
 
 
 def test_a_fit_worker_that_finds_other_inputs_than_planned_fits_nothing(tmp_path):
-    from skinfit import demo
+    from skinfit.apps import demo
     from skinfit.errors import InputError
 
     item = next(p for p in demo_plan(seed=1) if p["model"] == "electroadhesion_coulomb")
@@ -145,7 +146,7 @@ def test_a_fit_worker_that_finds_other_inputs_than_planned_fits_nothing(tmp_path
 
 
 def test_a_demo_into_a_folder_of_the_users_files_stops_before_fitting(tmp_path):
-    from skinfit.demo import run_demo
+    from skinfit.apps.demo import run_demo
     from skinfit.errors import InputError
 
     site = tmp_path / "site"

@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.cli import main
-from skinfit.design import (batch_eig, discrimination_plan, eig_nmc, gaussian_problem, greedy_plan,
+from skinfit.apps.cli import main
+from skinfit.analysis.design import (batch_eig, discrimination_plan, eig_nmc, gaussian_problem, greedy_plan,
                             laplace_design, read_candidates)
 from skinfit.errors import InputError
 
@@ -209,7 +209,7 @@ def test_same_seed_same_plan():
 
 
 def test_report_section_shows_plan_comparison_and_figure(tmp_path):
-    from skinfit.design import design_section_html
+    from skinfit.analysis.design import design_section_html
 
     cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
                                                                                           "values": [0, 200]}}}
@@ -225,8 +225,8 @@ def test_skinfit_report_shows_a_design_folder_as_a_section(tmp_path, capsys):
     comes back equal (load_design) and the report carries its section, figure and plan."""
     import re
 
-    from skinfit.cli import main
-    from skinfit.design import load_design
+    from skinfit.apps.cli import main
+    from skinfit.analysis.design import load_design
 
     cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
                                                                                           "values": [0, 200]}}}
@@ -251,7 +251,7 @@ def test_candidates_file_read_as_a_card_is(tmp_path):
     wait for ever), bad TOML names the file and its line."""
     import os
 
-    from skinfit.design import read_candidates
+    from skinfit.analysis.design import read_candidates
 
     model = skinfit.load_model("electroadhesion")
     fifo = tmp_path / "grid.toml"
@@ -273,7 +273,9 @@ def plane_fit(tmp_path_factory):
     the card and prior file: a CLI call resets the search path, so a test sets it again)."""
     import linear_gaussian as lg
 
-    from skinfit import paths, registry
+    from skinfit.io import paths
+
+    from skinfit.io import registry
 
     folder = tmp_path_factory.mktemp("plane")
     (folder / "models").mkdir()
@@ -520,7 +522,7 @@ def test_design_arguments_refused_with_an_input_error(tmp_path, kwargs, where, m
 def test_design_too_big_refused_with_its_size_before_work_starts(tmp_path, capsys, monkeypatch, argv, message):
     """Issue 39.14: a 10^6-point grid (a MemoryError asking 29.8 GiB) and --n 1000000 (over 300 s)
     are refused with the estimate, before any draw is checked against the support."""
-    design_mod = sys.modules["skinfit.design"]
+    design_mod = sys.modules["skinfit.analysis.design"]
 
     def started(*args, **kwargs):
         raise AssertionError("the work started")
@@ -557,14 +559,14 @@ def test_design_advice_names_real_options(plane_fit, tmp_path, capsys):
         main(["design", "--help"])
     options = set(re.findall(r"(--[a-z][a-z-]*)", capsys.readouterr().out))
     assert {"--baseline", "--inner", "--outer", "--sigma", "--n"} <= options
-    skinfit.paths.set_search_path([plane_fit[3]])
+    skinfit.io.paths.set_search_path([plane_fit[3]])
     try:
         with pytest.raises(InputError, match="--baseline") as info:
             skinfit.design("plane_test", PLANE_CANDIDATES, n=2, rng=1, n_outer=20, n_inner=20, n_batch=20)
     finally:
-        skinfit.paths.set_search_path([])
+        skinfit.io.paths.set_search_path([])
     named = set(re.findall(r"(--[a-z][a-z-]*)", str(info.value)))
-    source = Path(sys.modules["skinfit.design"].__file__).read_text()
+    source = Path(sys.modules["skinfit.analysis.design"].__file__).read_text()
     named |= set(re.findall(r"[\"' (](--[a-z][a-z-]*)", source))
     assert named and named <= options, named - options
     out = tmp_path / "o"

@@ -15,12 +15,12 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.cli import main
+from skinfit.apps.cli import main
 from skinfit.errors import InputError
-from skinfit.optimize import MAPError
+from skinfit.inference.optimize import MAPError
 from skinfit.posterior import Posterior
 
-fit_module = importlib.import_module("skinfit.fit")
+fit_module = importlib.import_module("skinfit.results.fit")
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA_DIR = ROOT / "datasets" / "electroadhesion_synthetic"
 MODEL = "electroadhesion_coulomb"  # the cheapest model on the shipped electroadhesion data
@@ -51,7 +51,7 @@ def _large_rows(n_copies):
     """The shipped electroadhesion design repeated ``n_copies`` times (216 * n_copies rows)."""
     ds = skinfit.load_dataset("electroadhesion_synthetic")
     frame = pd.concat([ds.frame] * n_copies, ignore_index=True)
-    return skinfit.data.Dataset(f"{ds.id}x{n_copies}", ds.title, frame, ds.columns, ds.groups, ds.provenance,
+    return skinfit.io.data.Dataset(f"{ds.id}x{n_copies}", ds.title, frame, ds.columns, ds.groups, ds.provenance,
                                 ds.model, ds.path, ds.sha256 + f"x{n_copies}")
 
 
@@ -73,7 +73,7 @@ def test_class5_pointwise_groups_thinned_to_the_memory_budget(monkeypatch, tmp_p
     assert "note: pointwise log-likelihood and predictive draws on every 7th draw" in fit.report_text()
     saved = skinfit.load_fit(fit.save(tmp_path / "fit.nc"))
     assert saved.attr("pointwise_thinned")["every"] == 7
-    from skinfit.compare import loo
+    from skinfit.analysis.compare import loo
 
     assert np.isfinite(float(loo(saved).elpd))
 
@@ -206,7 +206,7 @@ def test_class6_read_only_run_directory_gives_one_line(saved_fit, tmp_path, caps
         raise PermissionError(30, "Read-only file system", str(run / "checkpoint.h5"))
 
     monkeypatch.setattr(fit_module, "fit", _no_fit)
-    monkeypatch.setattr(importlib.import_module("skinfit.checkpoint").CheckpointLock, "__enter__", read_only)
+    monkeypatch.setattr(importlib.import_module("skinfit.inference.checkpoint").CheckpointLock, "__enter__", read_only)
     assert main(["fit", MODEL, "electroadhesion_synthetic", "--out", str(run), "--quiet", "--overwrite"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Read-only file system (errno 30); files written before are unchanged" in err

@@ -9,8 +9,8 @@ from scipy import stats
 from scipy.special import logsumexp
 
 import skinfit
-from skinfit.cli import main
-from skinfit.evidence_methods import LaplaceError, bayes_factor_strength, bridge_sampling, laplace, nested
+from skinfit.apps.cli import main
+from skinfit.analysis.evidence_methods import LaplaceError, bayes_factor_strength, bridge_sampling, laplace, nested
 
 
 # ---- a linear-Gaussian model: log Z in closed form ----------------------------------------

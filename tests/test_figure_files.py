@@ -8,7 +8,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image
 
-from skinfit import plots, report
+from skinfit.plots import figures as plots
+
+from skinfit.report import html as report
 
 
 def _figure():

@@ -7,8 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from skinfit import figure_store, plots, report
-from skinfit.fit import load_fit
+from skinfit.report import figure_store
+
+from skinfit.plots import figures as plots
+
+from skinfit.report import html as report
+from skinfit.results.fit import load_fit
 
 
 @pytest.fixture

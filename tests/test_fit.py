@@ -14,9 +14,9 @@ from scipy import optimize, stats
 import skinfit
 from skinfit.errors import InputError
 from pointwise import check_pointwise_groups
-from skinfit.optimize import find_map
+from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
-from skinfit.report import fit_diagnostics
+from skinfit.report.html import fit_diagnostics
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 CARD = tomllib.loads((ROOT / "datasets/electroadhesion_synthetic/dataset.toml").read_text())
@@ -78,7 +78,7 @@ def test_saved_summary_is_read_back_with_the_same_numbers_without_computing_it(e
     one computed from the same draws to the last bit, without computing it."""
     path = ea_fit.save(tmp_path / "fit.nc")
     computed = skinfit.load_fit(path)._compute_summary()
-    fit_module = importlib.import_module("skinfit.fit")
+    fit_module = importlib.import_module("skinfit.results.fit")
 
     def fail(self):
         raise AssertionError("summary computed although stored")
@@ -100,7 +100,7 @@ def test_a_fit_whose_summary_fails_is_saved_without_it(ea_fit, tmp_path, monkeyp
     tree = xr.open_datatree(path).load()
     del tree.attrs["summary"]
     tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
-    fit_module = importlib.import_module("skinfit.fit")
+    fit_module = importlib.import_module("skinfit.results.fit")
 
     def fail(self):
         raise ValueError("no summary here")
@@ -293,7 +293,7 @@ def test_pointwise_likelihood_matches_scipy(noise, rng):
     if noise == "student_t":
         from types import MappingProxyType
 
-        from skinfit.priors import PriorSet, parse_prior
+        from skinfit.io.priors import PriorSet, parse_prior
 
         extra = parse_prior("nu", {"dist": "gamma", "shape": 2, "scale": 10, "bounds": [1, 200],
                                    "source": "Juarez & Steel 2010 gamma(2, 0.1) prior on nu"}, "test")
@@ -351,7 +351,7 @@ def test_rng_types():
 
 def test_map_error_when_every_start_fails(tmp_path):
     """Priors that only allow eta so large that A_app < 0 at every point: a clear error."""
-    from skinfit.optimize import MAPError
+    from skinfit.inference.optimize import MAPError
 
     text = (ROOT / "priors" / "electroadhesion.toml").read_text()
     start, end = text.index("[eta]"), text.index("[alpha]")

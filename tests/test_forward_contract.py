@@ -3,7 +3,7 @@
 Issue 39, point 14: a plug-in forward that returned NaN, inf, the wrong shape or type, a dict
 without an observable, raised, or mixed up the parameter draws of a batch ended in a traceback
 from inside numpy, nlopt or emcee -- or, not vectorised, in a silently wrong fit.  Each such
-function is registered here in-process (skinfit.registry.register, no installed package
+function is registered here in-process (skinfit.io.registry.register, no installed package
 needed) under a copy of the example plug-in's card, and fitted: a ForwardError naming the card,
 the function and what was expected vs got, raised before the MAP search starts.  A NaN met
 only while sampling is the same one-line error, naming the parameter point and the data row.
@@ -19,13 +19,13 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit import registry
+from skinfit.io import registry
 from skinfit.errors import ForwardError, InputError
-from skinfit.forward_check import CHECK_DRAWS
+from skinfit.io.forward_check import CHECK_DRAWS
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 CARDS = ROOT / "examples" / "skinfit-example-plugin" / "skinfit_example_plugin" / "cards"
-fit_module = __import__("importlib").import_module("skinfit.fit")
+fit_module = __import__("importlib").import_module("skinfit.results.fit")
 N_ROWS = 40
 
 
@@ -194,7 +194,7 @@ def test_class_forward_nan_met_while_fitting_is_one_line_naming_point_and_row(ca
 def test_class_forward_nan_while_sampling_stops_emcee_without_its_traceback(capsys):
     """emcee prints a traceback for any exception of the target: the sampler keeps the error,
     ends the step and raises it itself."""
-    from skinfit.sampling import run_emcee
+    from skinfit.inference.sampling import run_emcee
 
     class Target:
         calls = 0
@@ -213,7 +213,7 @@ def test_class_forward_nan_while_sampling_stops_emcee_without_its_traceback(caps
 
 
 def test_class_forward_error_raised_inside_nlopt_is_itself_not_a_systemerror():
-    from skinfit.optimize import _nlopt
+    from skinfit.inference.optimize import _nlopt
 
     def objective(w, grad):
         if w[0] > 0.6:
@@ -254,7 +254,7 @@ def test_class_forward_contract_cli_one_line_error(data_csv, tmp_path):
     script.write_text(
         "import sys, numpy as np\n"
         "from skinfit import registry\n"
-        "from skinfit.cli import main\n"
+        "from skinfit.apps.cli import main\n"
         "def wrong(p, x, c):\n"
         "    return {'tangential_force': np.zeros((len(p['mu']), 3))}, True\n"
         "registry.register('forward', 'cli_wrong_shape', wrong)\n"

@@ -26,7 +26,7 @@ import skinfit
 from skinfit.errors import InputError, InputTypeError
 
 MODEL, DATASET = "electroadhesion_coulomb", "electroadhesion_synthetic"
-fit_module = importlib.import_module("skinfit.fit")  # (the package attribute `skinfit.fit` is the function)
+fit_module = importlib.import_module("skinfit.results.fit")  # (the package attribute `skinfit.fit` is the function)
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                           HealthCheck.function_scoped_fixture])
 #: memory the size checks see (patched): 8 GiB, so that what is refused does not depend on the machine
@@ -87,13 +87,13 @@ def _no_work(monkeypatch):
     """The first expensive step of each entry point raises _WorkStarted; memory is MEMORY."""
     monkeypatch.setattr(fit_module, "find_map", _work)
     monkeypatch.setattr(fit_module, "available_memory", lambda: MEMORY)
-    monkeypatch.setattr(importlib.import_module("skinfit.arguments"), "available_memory", lambda: MEMORY)
-    sbc = importlib.import_module("skinfit.sbc")
+    monkeypatch.setattr(importlib.import_module("skinfit.io.arguments"), "available_memory", lambda: MEMORY)
+    sbc = importlib.import_module("skinfit.analysis.sbc")
     monkeypatch.setattr(sbc, "_map", _work)
-    evidence = importlib.import_module("skinfit.evidence")
+    evidence = importlib.import_module("skinfit.analysis.evidence")
     for name in ("bridge_sampling", "laplace", "nested"):
         monkeypatch.setattr(evidence, name, _work)
-    monkeypatch.setattr(importlib.import_module("skinfit.compare"), "evidence", _work)
+    monkeypatch.setattr(importlib.import_module("skinfit.analysis.compare"), "evidence", _work)
 
 
 def _refused(call):
@@ -110,11 +110,11 @@ LOADERS = {
     "load_priors": lambda v: skinfit.load_priors(v),
     "load_dataset": lambda v: skinfit.load_dataset(v),
     "load_fit": lambda v: skinfit.load_fit(v),
-    "load_groups": lambda v: importlib.import_module("skinfit.groups").load_groups(v),
+    "load_groups": lambda v: importlib.import_module("skinfit.analysis.groups").load_groups(v),
     "fit(model=)": lambda v: skinfit.fit(v, DATASET),
     "fit(dataset=)": lambda v: skinfit.fit(MODEL, v),
     "fit(priors=)": lambda v: skinfit.fit(MODEL, DATASET, priors=v),
-    "run_sbc(model=)": lambda v: importlib.import_module("skinfit.sbc").run_sbc(v, n_sims=1),
+    "run_sbc(model=)": lambda v: importlib.import_module("skinfit.analysis.sbc").run_sbc(v, n_sims=1),
     "design(fit_or_model=)": lambda v: skinfit.design(v, {"normal_force": np.array([0.5, 1.0])}, n=1),
 }
 
@@ -143,8 +143,8 @@ FIT_USERS = {
     "evidence": lambda v: skinfit.evidence(v),
     "compare([v, v])": lambda v: skinfit.compare([v, v]),
     "compare({a: v, b: v})": lambda v: skinfit.compare({"a": v, "b": v}),
-    "level_contrasts": lambda v: importlib.import_module("skinfit.contrasts").level_contrasts(v, "mu"),
-    "fit_contrasts": lambda v: importlib.import_module("skinfit.contrasts").fit_contrasts({"a": v, "b": v}, "mu"),
+    "level_contrasts": lambda v: importlib.import_module("skinfit.analysis.contrasts").level_contrasts(v, "mu"),
+    "fit_contrasts": lambda v: importlib.import_module("skinfit.analysis.contrasts").fit_contrasts({"a": v, "b": v}, "mu"),
 }
 
 
@@ -162,7 +162,7 @@ def test_class_not_a_fit_where_a_fit_is_expected_refused_in_one_line(places, tar
                           "not a Fit ends in a TypeError / AttributeError from population._as_fits", strict=False)
 @pytest.mark.parametrize("value", [None, 5, np.zeros(3), [1, 2], [None, None]], ids=repr)
 def test_class_not_a_fit_population_refused_in_one_line(value):
-    population = importlib.import_module("skinfit.population").population
+    population = importlib.import_module("skinfit.analysis.population.population").population
     _refused(lambda: population(value))
 
 
@@ -200,7 +200,7 @@ def _call(fn, name, value, fit):
         return skinfit.fit(MODEL, DATASET, **kwargs)
     if fn == "evidence":
         return skinfit.evidence(fit, refresh=True, **kwargs)
-    return importlib.import_module("skinfit.sbc").run_sbc(MODEL, **{"n_sims": 2, **kwargs})
+    return importlib.import_module("skinfit.analysis.sbc").run_sbc(MODEL, **{"n_sims": 2, **kwargs})
 
 
 def _valid(key, value):
@@ -271,7 +271,7 @@ def test_class_wrong_settings_of_fit_refused_before_the_map(kwargs, match):
 
 
 def test_class_wrong_settings_of_evidence_and_contrasts_refused(small_fit):
-    contrasts = importlib.import_module("skinfit.contrasts")
+    contrasts = importlib.import_module("skinfit.analysis.contrasts")
     for call, match in [
         (lambda: skinfit.evidence(small_fit, method="bridges"), r"evidence: method: unknown evidence method 'bridges'"),
         (lambda: skinfit.evidence(small_fit, refresh=True, tol_x=1), r"unknown option\(s\) tol_x of method 'bridge' "

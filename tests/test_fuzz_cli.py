@@ -1,7 +1,7 @@
 """Every subcommand of the command line, every option, hostile values (issue 39, point 14).
 
 The subcommands and their options are read from the parser (``skinfit --help``), so a new option
-is fuzzed the day it is added.  Each generated case runs ``skinfit.cli.main`` in-process on a
+is fuzzed the day it is added.  Each generated case runs ``skinfit.apps.cli.main`` in-process on a
 valid command line with one argument replaced by a hostile value (negative, zero, huge, NaN,
 empty, unicode, a missing path, a folder, /dev/null, /dev/zero, a FIFO); the first expensive
 step of every command is replaced by a stand-in that raises ``_WorkStarted``.  Properties: the
@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from popdata import write_population
-from skinfit.cli import build_parser, main
+from skinfit.apps.cli import build_parser, main
 
 MODEL, DATASET = "electroadhesion_coulomb", "electroadhesion_synthetic"
 ERROR_LINE = re.compile(r"^skinfit(?: [\w-]+)?: error: ")
@@ -45,17 +45,17 @@ def _work(*args, **kwargs):
 
 
 #: module -> names replaced by _work: the first step of each command that costs more than reading
-STAND_INS = {"skinfit.fit": ["find_map"], "skinfit.compare": ["evidence"], "skinfit.report": ["write_report"],
-             "skinfit.campaign": ["_run_locked"], "skinfit.population": ["run_gibbs", "_reweight"],
-             "skinfit.sbc": ["_map"], "skinfit.demo": ["ProcessPoolExecutor"],
-             "skinfit.design": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"]}
+STAND_INS = {"skinfit.results.fit": ["find_map"], "skinfit.analysis.compare": ["evidence"], "skinfit.report.html": ["write_report"],
+             "skinfit.apps.campaign": ["_run_locked"], "skinfit.analysis.population.population": ["run_gibbs", "_reweight"],
+             "skinfit.analysis.sbc": ["_map"], "skinfit.apps.demo": ["ProcessPoolExecutor"],
+             "skinfit.analysis.design": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"]}
 
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory):
     """A saved fit, a run by groups of two subjects, a campaign file, a candidate grid, a FIFO."""
     import skinfit
-    from skinfit.groups import fit_by
+    from skinfit.analysis.groups import fit_by
 
     root = tmp_path_factory.mktemp("cli_fuzz")
     with warnings.catch_warnings():

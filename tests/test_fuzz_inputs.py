@@ -17,16 +17,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import skinfit
-from skinfit.campaign import load_campaign
-from skinfit.data import load_dataset
+from skinfit.apps.campaign import load_campaign
+from skinfit.io.data import load_dataset
 from skinfit.errors import InputError
-from skinfit.models import load_model
+from skinfit.io.models import load_model
 from skinfit.posterior import Posterior
-from skinfit.priors import load_priors
+from skinfit.io.priors import load_priors
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA_DIR = ROOT / "datasets" / "electroadhesion_synthetic"
-fit_module = importlib.import_module("skinfit.fit")  # (the package attribute `skinfit.fit` is the function)
+fit_module = importlib.import_module("skinfit.results.fit")  # (the package attribute `skinfit.fit` is the function)
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -272,7 +272,7 @@ scheduler_values = st.one_of(st.lists(ADDRESS_BITS, max_size=8).map("".join),
 def test_any_scheduler_value_is_taken_or_refused_in_one_line(value):
     """--scheduler / a campaign file's scheduler: None, 'local' or SCHEME://HOST:PORT is taken;
     anything else is an InputError of one line naming --scheduler, never another exception."""
-    from skinfit.workers import SCHEMES, check_scheduler
+    from skinfit.inference.workers import SCHEMES, check_scheduler
 
     try:
         taken = check_scheduler(value)
@@ -296,7 +296,7 @@ odd_text = st.lists(st.one_of(PATH_BITS, st.characters(blacklist_categories=["Cs
 @settings(max_examples=200, deadline=None)
 @given(labels=st.lists(odd_text, min_size=1, max_size=8, unique=True))
 def test_class2_group_folders_distinct_names_inside_out(labels):
-    from skinfit.groups import NAME, group_dir, inside
+    from skinfit.analysis.groups import NAME, group_dir, inside
 
     names = [group_dir(x) for x in labels]
     assert len({n.casefold() for n in names}) == len(labels)  # distinct even on a case-insensitive disk
@@ -491,7 +491,7 @@ PHYSICS_NAMES = sorted({f"skinfit.physics.{m}:{n}" for m in ("electroadhesion", 
 def test_class7_property_a_card_names_only_code_registered_for_the_role(role, ref):
     """Class 7: every attribute of every physics module (functions, helpers, constants, imported
     modules: ~130 names) in each of the four roles; accepted exactly when registered for it."""
-    from skinfit import registry
+    from skinfit.io import registry
 
     field = {"forward": "forward", "shear": "sampling.shear.phi", "shift": "sampling.shift.d_air",
              "derived": "derived.function"}[role]
@@ -546,7 +546,7 @@ cli_numbers = st.one_of(st.integers(-2**80, 2**80), st.floats(allow_nan=True, al
 @SETTINGS
 @given(option=st.sampled_from(["--seed", "--max-steps", "--ess", "--checkpoint-every"]), value=cli_numbers)
 def test_class6_cli_numbers_parse_into_range_or_exit_2(option, value):
-    from skinfit.cli import build_parser
+    from skinfit.apps.cli import build_parser
 
     try:
         args = build_parser().parse_args(["fit", "m", "d", "--out", "o", option, str(value)])

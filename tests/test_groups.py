@@ -9,8 +9,8 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.cli import main
-from skinfit.groups import derive_seed, fit_by, group_labels, load_groups
+from skinfit.apps.cli import main
+from skinfit.analysis.groups import derive_seed, fit_by, group_labels, load_groups
 
 
 def test_derive_seed_stable_and_keyed():
@@ -134,7 +134,7 @@ def test_class1_load_groups_warns_when_the_data_changed_since(odd_run, tmp_path)
 
 
 def test_group_dir_is_a_name_distinct_per_exact_label():
-    from skinfit.groups import NAME, group_dir
+    from skinfit.analysis.groups import NAME, group_dir
 
     labels = ["a/b", "a b", "a_b", "A_B", "a=b", "a-b", "..", "../../x", "/etc/passwd", "", "é", "e"]
     names = [group_dir(x) for x in labels]
@@ -146,7 +146,7 @@ def test_group_dir_is_a_name_distinct_per_exact_label():
 def test_class2_by_run_refuses_an_out_in_use(tmp_path, capsys):
     import os
 
-    from skinfit.checkpoint import CheckpointLock
+    from skinfit.inference.checkpoint import CheckpointLock
 
     path, _ = write_population(tmp_path, n_subjects=1)
     out = tmp_path / "run"
@@ -183,7 +183,7 @@ def test_class4_group_labels_with_path_syntax_stay_inside_out(tmp_path):
 
 
 def test_class1_report_check_names_fits_whose_data_changed(odd_run):
-    from skinfit.groups import data_drift
+    from skinfit.analysis.groups import data_drift
 
     folder, data = odd_run
     fits = load_groups(folder / "run")
@@ -205,7 +205,7 @@ def test_class_results_overwritten_an_out_holding_a_fit_is_refused_unless_overwr
     the result there was made from other inputs, and not a byte of it changed; the other kind
     of run is refused even with --overwrite; --overwrite replaces. (Before: a rerun of the same
     inputs replaced the result without a word.)"""
-    from skinfit.fit import load_fit
+    from skinfit.results.fit import load_fit
 
     path, _ = write_population(tmp_path / "a", n_subjects=2)
     other, _ = write_population(tmp_path / "b", n_subjects=2, truths={"S01": 0.2, "S02": 0.8})
@@ -244,7 +244,7 @@ def test_class_results_overwritten_an_out_holding_a_fit_is_refused_unless_overwr
         holds(["fit", "electroadhesion", str(path), "--by", "subject", "--out", str(run), *quick], run,
               "a run of electroadhesion_coulomb by subject, made from another model" + after.format("electroadhesion")
               + by_run)
-        from skinfit.priors import load_priors
+        from skinfit.io.priors import load_priors
 
         (tmp_path / "priors.toml").write_text(load_priors("electroadhesion_coulomb").text + "\n# edited\n")
         holds(["fit", "electroadhesion_coulomb", str(path), "--by", "subject", "--priors",
@@ -271,7 +271,7 @@ def test_class_results_overwritten_an_unfinished_fit_is_continued_or_replaced_on
     is refused (it would start afresh over hours of sampling), naming --resume and --overwrite;
     --resume of a finished fit without a checkpoint is refused rather than started afresh over it;
     a user's summary.csv in --out is not replaced without --overwrite."""
-    from skinfit.checkpoint import load_checkpoint
+    from skinfit.inference.checkpoint import load_checkpoint
 
     out = tmp_path / "run"
     argv = ["fit", "electroadhesion_coulomb", "electroadhesion_synthetic", "--out", str(out), "--seed", "1",
@@ -335,7 +335,7 @@ def test_failing_fit_never_touches_another_group_of_a_by_run(tmp_path, capsys):
     """Issue 39 point 8 for `skinfit fit --by`: S01 fits, S02's MAP fails. S01 is saved and
     listed; S02 is listed under 'failed' with its one-line error; the run exits 1; load_groups
     returns S01 and warns that S02 is left out; read_index counts it as not complete."""
-    from skinfit.groups import read_index
+    from skinfit.analysis.groups import read_index
 
     data = _two_subjects_one_impossible(tmp_path)
     run = tmp_path / "run"

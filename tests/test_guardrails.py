@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit import guardrails
-from skinfit.cli import main
+from skinfit.inference import guardrails
+from skinfit.apps.cli import main
 from skinfit.posterior import Posterior
-from skinfit.report import fit_diagnostics
-from skinfit.sampling import SamplerRun
+from skinfit.report.html import fit_diagnostics
+from skinfit.inference.sampling import SamplerRun
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL, DATA = "electroadhesion_empirical", "electroadhesion_synthetic"
@@ -159,10 +159,10 @@ def test_library_fit_warns(bounded_priors):
 # ---- issue 39 point 4: warnings that cry wolf ---------------------------------------------------
 def _simulated_csv(path, seed):
     """Data simulated from electroadhesion at its shipped design with parameters drawn from its
-    prior, drawn as skinfit.misfit.simulated_check draws them, written as a CSV with units in
+    prior, drawn as skinfit.analysis.misfit.simulated_check draws them, written as a CSV with units in
     its header; and the fit seed simulated_check uses."""
     from skinfit.posterior import Posterior
-    from skinfit.sbc import _draw_truth, design_dataset
+    from skinfit.analysis.sbc import _draw_truth, design_dataset
 
     model = skinfit.load_model(E2E)
     rng = np.random.default_rng(seed)

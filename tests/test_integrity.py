@@ -14,9 +14,9 @@ import pytest
 import xarray as xr
 
 import skinfit
-from skinfit import integrity
-from skinfit.cli import main
-from skinfit.compare import loo_record
+from skinfit.io import integrity
+from skinfit.apps.cli import main
+from skinfit.analysis.compare import loo_record
 from skinfit.errors import IntegrityWarning
 
 SUBJECTS = ("S01", "S02", "S03")
@@ -163,7 +163,7 @@ def test_the_checksums_are_those_every_netcdf_reader_sees(run):
     xr.testing.assert_identical(ours, tree)
     import h5netcdf
 
-    from skinfit.fit import _decoded
+    from skinfit.results.fit import _decoded
 
     with h5netcdf.File(path, "r", decode_vlen_strings=True) as h:
         integrity.verify(path, record, groups={g: _decoded(h.groups[g]) for g in h.groups})
@@ -218,7 +218,7 @@ def test_an_edited_number_is_refused_a_resaved_fit_is_not(run, tmp_path):
 def test_a_damaged_population_file_is_refused(run, tmp_path):
     """population.nc: its checksums are checked on read (load_population, and the report that
     shows it); 4 KiB zeroed in its values is refused in one line naming it."""
-    from skinfit.population import load_population, population
+    from skinfit.analysis.population.population import load_population, population
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

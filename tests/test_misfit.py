@@ -12,10 +12,10 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.run_labels import run_labels
-from skinfit.misfit import ALPHA, MisfitWarning, check_fit, simulated_check
+from skinfit.results.run_labels import run_labels
+from skinfit.analysis.misfit import ALPHA, MisfitWarning, check_fit, simulated_check
 from skinfit.posterior import Posterior
-from skinfit.report import _as_fits, fit_diagnostics
+from skinfit.report.html import _as_fits, fit_diagnostics
 
 #: electroadhesion_coulomb parameters for the issue's case (mu, E_star, d_air, sigma), near
 #: the shipped electroadhesion data's: friction 0.6, 35 kPa, 0.19 um air gap, 20 mN noise
@@ -85,7 +85,7 @@ def test_class8_competing_variant_on_electroadhesion_data_warns():
 
 
 def test_class8_strict_cli_fails_on_a_misfit(tmp_path, capsys):
-    from skinfit.cli import main
+    from skinfit.apps.cli import main
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -125,12 +125,12 @@ def test_class8_strict_by_runs_fail_on_a_warned_group(tmp_path, monkeypatch, war
     """``--by`` with ``--strict`` exits 3 when a converged group warned, as a single fit does."""
     import pandas as pd
 
-    groups = importlib.import_module("skinfit.groups")
+    groups = importlib.import_module("skinfit.analysis.groups")
     index = pd.DataFrame({"group": ["a", "b"], "rows": [5, 5], "seed": [1, 2], "converged": [True, True],
                           "warnings": [0, warned], "seconds": [0.1, 0.1], "path": ["a/fit.nc", "b/fit.nc"],
                           "status": ["done", "done"]})
     monkeypatch.setattr(groups, "fit_by", lambda *a, **k: index)
-    from skinfit.cli import main
+    from skinfit.apps.cli import main
 
     assert main(["fit", "m", "d", "--out", str(tmp_path), "--by", "subject", "--strict"]) == code
 

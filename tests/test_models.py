@@ -59,8 +59,8 @@ def test_unknown_model_lists_known():
 def test_missing_shipped_cards_say_where_they_were_looked_for(tmp_path, monkeypatch):
     """With nothing on the search path (no shipped files, an empty user folder) the error names
     every folder searched and where it came from, not an empty list."""
-    import skinfit.paths
-    import skinfit.registry
+    import skinfit.io.paths
+    import skinfit.io.registry
 
     monkeypatch.setattr(skinfit.paths, "shipped_root", lambda: None)
     monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])

@@ -5,7 +5,7 @@ import emcee
 import numpy as np
 import pytest
 
-from skinfit.moves import SnookerMove, default_moves
+from skinfit.inference.moves import SnookerMove, default_moves
 
 D = 5
 
@@ -53,7 +53,7 @@ def test_vectorised_accept_gives_emcee_chain():
     over walkers.  Same proposals and the same random stream must give the identical chain."""
     from emcee.moves.red_blue import RedBlueMove
 
-    from skinfit.moves import DEMove
+    from skinfit.inference.moves import DEMove
 
     emcee_snooker = type("EmceeLoopSnooker", (RedBlueMove,), {"get_proposal": SnookerMove.get_proposal, "gamma": 1.7})
     chains = []
@@ -69,7 +69,7 @@ def test_vectorised_accept_gives_emcee_chain():
 def _mismatched_proposal(rng_seed=3):
     """A Student-t proposal off the D-dimensional target of :func:`_sample`: mean shifted by one
     standard deviation, scale 1.3 times too wide, no correlations."""
-    from skinfit.proposal import MixtureT
+    from skinfit.inference.proposal import MixtureT
 
     rng = np.random.default_rng(rng_seed)
     a = rng.normal(size=(D, D))
@@ -85,7 +85,7 @@ def test_independence_move_samples_gaussian():
     with one update a step and with three chained updates evaluated in one call, which on
     this target doubles the effective sample size of the same number of steps (measured:
     4203 -> 8892)."""
-    from skinfit.moves import DEMove, IndependenceMove
+    from skinfit.inference.moves import DEMove, IndependenceMove
 
     ess_by_substeps = {}
     for substeps in (1, 3):
@@ -103,7 +103,7 @@ def test_independence_move_samples_gaussian():
 
 def test_negative_control_independence_move_without_hastings_factor_is_biased():
     """The same move accepting with pi(q)/pi(x) alone samples pi*g, not pi: the harness sees it."""
-    from skinfit.moves import DEMove, IndependenceMove
+    from skinfit.inference.moves import DEMove, IndependenceMove
 
     class NoHastings(IndependenceMove):
         def propose(self, model, state):

@@ -10,9 +10,9 @@ import pytest
 import xarray as xr
 
 import skinfit
-from skinfit import integrity
-from skinfit._netcdf import NotPlain, read_groups
-from skinfit.fit import _decoded
+from skinfit.io import integrity
+from skinfit.results._netcdf import NotPlain, read_groups
+from skinfit.results.fit import _decoded
 
 
 def _same_mapping(a, b, where):
@@ -146,7 +146,7 @@ def test_attributes_are_read_as_h5py_and_h5netcdf_read_them(subject_file, tmp_pa
     """Each attribute read once by the direct reader has the value, type and HDF5 type h5py's
     ``attrs[name]`` and ``attrs.get_id(name)`` give (references compared by what they name),
     for every kind of attribute; the groups are then what h5netcdf reads."""
-    from skinfit._netcdf import _attributes
+    from skinfit.results._netcdf import _attributes
 
     path = _edited(subject_file, tmp_path / "odd.nc", _odd_attributes)
     with h5py.File(path) as f:

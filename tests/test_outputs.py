@@ -11,8 +11,8 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.campaign import check_campaign_out, load_campaign
-from skinfit.cli import main
+from skinfit.apps.campaign import check_campaign_out, load_campaign
+from skinfit.apps.cli import main
 
 QUICK = ["--ess", "50", "--max-steps", "300", "--quiet"]
 
@@ -45,7 +45,7 @@ def test_class_results_overwritten_design_out(tmp_path, refused):
 def test_class_results_overwritten_population_out(tmp_path, refused):
     """`skinfit population RUN` twice (its default --out RUN/population): the second refused
     before sampling; --overwrite replaces."""
-    from skinfit.groups import fit_by
+    from skinfit.analysis.groups import fit_by
 
     path, _ = write_population(tmp_path / "data", n_subjects=3)
     run = tmp_path / "run"

@@ -13,9 +13,9 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit import report
-from skinfit.checkpoint import CheckpointLock, _host, remove_stale_temps, temp_file
-from skinfit.groups import fit_by
+from skinfit.report import html as report
+from skinfit.inference.checkpoint import CheckpointLock, _host, remove_stale_temps, temp_file
+from skinfit.analysis.groups import fit_by
 
 
 def _dead_pid():

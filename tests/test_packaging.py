@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 import skinfit
-import skinfit.registry
-import skinfit.paths
-from skinfit.cli import main
+import skinfit.io.registry
+import skinfit.io.paths
+from skinfit.apps.cli import main
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 SHIPPED = {"models": sorted(p.stem for p in (ROOT / "models").glob("*.toml")),
@@ -32,9 +32,9 @@ def isolated(tmp_path, monkeypatch):
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
     monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
     monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
-    skinfit.paths.set_search_path([])
+    skinfit.io.paths.set_search_path([])
     yield tmp_path
-    skinfit.paths.set_search_path([])
+    skinfit.io.paths.set_search_path([])
 
 
 def _card(folder, model_id, title):
@@ -53,7 +53,7 @@ def test_shipped_files_are_every_top_level_card_and_dataset(isolated):
     """What the search path lists from the shipped folder is exactly the repository's models/,
     priors/ and datasets/ (in a checkout read in place; in a wheel from skinfit/_shipped)."""
     for kind, ids in SHIPPED.items():
-        found = skinfit.paths.entries(kind)
+        found = skinfit.io.paths.entries(kind)
         assert sorted(found) == ids
         assert {e.root.origin for e in found.values()} == {"shipped"}
 
@@ -66,11 +66,11 @@ def test_search_path_precedence_explicit_then_env_then_user_then_shipped(isolate
     for folder in (explicit, env_a, env_b, user):
         _card(folder, "electroadhesion", f"from {folder.name}")
     monkeypatch.setenv("SKINFIT_PATH", os.pathsep.join([str(env_a), str(env_b)]))
-    skinfit.paths.set_search_path([explicit])
+    skinfit.io.paths.set_search_path([explicit])
     assert skinfit.load_model("electroadhesion").title == "from explicit"
-    entry = skinfit.paths.entries("models")["electroadhesion"]
+    entry = skinfit.io.paths.entries("models")["electroadhesion"]
     assert [r.origin for r in entry.shadows] == ["$SKINFIT_PATH", "$SKINFIT_PATH", "user", "shipped"]
-    skinfit.paths.set_search_path([])
+    skinfit.io.paths.set_search_path([])
     assert skinfit.load_model("electroadhesion").title == "from env_a"
     monkeypatch.setenv("SKINFIT_PATH", str(env_b))
     assert skinfit.load_model("electroadhesion").title == "from env_b"
@@ -138,7 +138,7 @@ def test_missing_optional_dependency_names_the_extra(monkeypatch):
 
 
 def test_warnings_print_one_line_without_the_source_line(tmp_path, capsys):
-    from skinfit.cli import _format_warning
+    from skinfit.apps.cli import _format_warning
 
     text = _format_warning(skinfit.ConvergenceWarning("E_star: 9% near the bound"), skinfit.ConvergenceWarning,
                            "/x/skinfit/fit.py", 152, "warnings.warn(msg)")
@@ -319,7 +319,7 @@ def test_public_functions_are_annotated():
         missing = [p.name for p in sig.parameters.values()
                    if p.annotation is inspect.Parameter.empty and p.kind is not p.VAR_KEYWORD]
         assert not missing and sig.return_annotation is not inspect.Signature.empty, (name, missing)
-    from skinfit.population import population
+    from skinfit.analysis.population.population import population
 
     assert inspect.signature(population).return_annotation == "PopulationResult"
     assert (Path(skinfit.__file__).parent / "py.typed").is_file()

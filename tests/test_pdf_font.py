@@ -19,7 +19,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 from fontTools.ttLib import TTFont  # noqa: E402
 from matplotlib.ft2font import FT2Font, LoadFlags  # noqa: E402
 
-from skinfit import _pdf_font, plots  # noqa: E402
+from skinfit import plots  # noqa: E402
+
+from skinfit.plots import _pdf_font
 
 pytestmark = pytest.mark.skipif(_pdf_font.derived() is None, reason="no DejaVu Sans cut here (see its log)")
 
@@ -169,7 +171,8 @@ _CACHE_SCRIPT = textwrap.dedent("""
     matplotlib.use("Agg")
     matplotlib.rcParams["text.hinting"] = "default"  # matplotlib < 3.11 forces the auto-hinter: no cut
     import matplotlib.pyplot as plt
-    from skinfit import _pdf_font, plots
+    from skinfit.plots import _pdf_font
+    from skinfit.plots import figures as plots
     _pdf_font.cache_dir = lambda: Path(sys.argv[1])
     cut = _pdf_font.derived()
     fig, ax = plt.subplots()
@@ -199,7 +202,7 @@ def test_the_cut_is_made_once_atomically_and_again_when_damaged(tmp_path):
     of its own left; a killed derivation's removed, a live one's left to its process), the same
     bytes by every derivation; a damaged file there is cut again; where the folder cannot be
     written, figures are saved with DejaVu Sans."""
-    from skinfit.checkpoint import temp_file
+    from skinfit.inference.checkpoint import temp_file
 
     folder = tmp_path / "fonts"
     folder.mkdir()

@@ -13,7 +13,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit import plots, registry
+from skinfit.plots import figures as plots
+from skinfit.io import registry
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -346,7 +347,7 @@ def test_a_saved_fit_whose_model_function_is_gone_says_so_in_its_predictive_chec
     marks the predictive median at the data's x (markers, in the pair panels too: no line through
     the data), names it for what it is in the legend (no "posterior median" curve listed), and
     warns with the reason."""
-    from skinfit.fit import load_fit
+    from skinfit.results.fit import load_fit
 
     standin["ca"].save(tmp_path / "ca.nc")
     ref = "skinfit.physics._plot_standin:contact_pair"
@@ -599,7 +600,7 @@ def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name
     constrained layout with every tick puts them, and the figure as saved keeps the rules."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from skinfit import report
+    from skinfit.report import html as report
 
     fit = fits("contact_area", "contact_area_synthetic")  # log axes on both sides, many panels
     func = dict(FIGURES)[name]

@@ -1,5 +1,5 @@
 """A model added without editing skinfit (issue 22, point 3): the example plug-in package under
-examples/skinfit-example-plugin registers its physics function through the ``skinfit.models``
+examples/skinfit-example-plugin registers its physics function through the ``skinfit.io.models``
 entry point and brings its model card and prior file; skinfit lists it and fits it end to end,
 recovering the parameters that generated the data.
 
@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit import registry
+from skinfit.io import registry
 
 MU, F0, SIGMA = 0.45, 0.08, 0.01  # generating parameters [1], [N], [N]
 PLUGIN = Path(__file__).resolve().parents[1] / "examples" / "skinfit-example-plugin"

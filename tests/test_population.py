@@ -13,10 +13,10 @@ from scipy import stats
 import skinfit
 from popdata import MU_MEDIAN, TAU, write_population
 from popsim import draw_population, quadrature, run_sbc, subject_fits
-from skinfit.cli import main
+from skinfit.apps.cli import main
 from skinfit.errors import InputError
-from skinfit.groups import fit_by
-from skinfit.population import (PopulationResult, PopulationWarning, _cholesky_corr, load_population, load_run,
+from skinfit.analysis.groups import fit_by
+from skinfit.analysis.population.population import (PopulationResult, PopulationWarning, _cholesky_corr, load_population, load_run,
                                 population, population_tables)
 
 
@@ -241,7 +241,7 @@ def test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs(thi
     import pandas as pd
     import xarray as xr
 
-    module = importlib.import_module("skinfit.population")
+    module = importlib.import_module("skinfit.analysis.population.population")
     _, fits, _ = thirteen
     small = dict(list(fits.items())[:4])
     cache = tmp_path / "cache" / "population.npz"
@@ -293,7 +293,7 @@ def test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs(thi
 
 _CACHED_POPULATION = """
 import json, sys, warnings
-from skinfit.population import load_run, population
+from skinfit.analysis.population.population import load_run, population
 
 fits = dict(list(load_run(sys.argv[1]).items())[:4])
 with warnings.catch_warnings():
@@ -343,8 +343,8 @@ def test_a_population_records_its_fits_by_content_and_its_seed(thirteen, cli_res
     which reproduces it."""
     import xarray as xr
 
-    from skinfit.fit import load_fit
-    from skinfit.population import subject_digest
+    from skinfit.results.fit import load_fit
+    from skinfit.analysis.population.population import subject_digest
 
     run, fits, _ = thirteen
     back = cli_result[2]
@@ -383,7 +383,7 @@ def test_correlated_population_gives_valid_correlations(thirteen):
 
 def test_inverse_wishart_draws_match_the_closed_form_mean():
     """Bartlett's construction of InvWishart(df, Psi): mean Psi / (df - p - 1)."""
-    from skinfit.hierarchical import _inv_wishart
+    from skinfit.analysis.population.hierarchical import _inv_wishart
 
     rng = np.random.default_rng(1)
     psi = np.array([[2.0, 0.5], [0.5, 1.0]])
@@ -448,14 +448,14 @@ def test_gibbs_hyper_posterior_is_the_same_in_product_shift_and_shear_coordinate
 
     import arviz as az
 
-    from skinfit.data import load_dataset
-    from skinfit.fit import _slot_values
-    from skinfit.groups import group_labels
-    from skinfit.models import load_model
-    from skinfit.paths import shipped_root
-    from skinfit.population import DrawsFit
+    from skinfit.io.data import load_dataset
+    from skinfit.results.fit import _slot_values
+    from skinfit.analysis.groups import group_labels
+    from skinfit.io.models import load_model
+    from skinfit.io.paths import shipped_root
+    from skinfit.analysis.population.population import DrawsFit
     from skinfit.posterior import Posterior
-    from skinfit.priors import load_priors
+    from skinfit.io.priors import load_priors
 
     _sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
     from bench_population_weak import three_subjects

@@ -30,11 +30,11 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.cli import build_parser, main
-from skinfit.contrasts import fit_contrasts, level_contrasts
+from skinfit.apps.cli import build_parser, main
+from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
 from skinfit.errors import InputError
-from skinfit.groups import fit_by, load_groups
-from skinfit.population import PopulationWarning, load_population, load_run, population
+from skinfit.analysis.groups import fit_by, load_groups
+from skinfit.analysis.population.population import PopulationWarning, load_population, load_run, population
 
 SOURCES = ("population.py", "population_checks.py", "hierarchical.py", "groups.py", "contrasts.py")
 
@@ -195,7 +195,7 @@ def test_class_wrong_inputs_a_damaged_run_is_a_one_line_error(copy, capsys, dama
 def test_class_concurrent_writers_a_run_being_written_is_not_read(run3, capsys):
     """`fit --by` rewrites index.json group by group: a population reading it meanwhile would see
     only the groups done so far. The population takes the reader's side of the writer's lock."""
-    from skinfit.checkpoint import CheckpointLock
+    from skinfit.inference.checkpoint import CheckpointLock
 
     run, _ = run3
     out = run.parent / "pop_busy"
@@ -220,7 +220,7 @@ def test_class_concurrent_writers_a_second_population_into_one_out_is_refused(ru
     first holds it (both had printed "written" and one result survived)."""
     run, _ = run3
     out = tmp_path / "pop"
-    code = ("import sys, time; from skinfit.checkpoint import CheckpointLock\n"
+    code = ("import sys, time; from skinfit.inference.checkpoint import CheckpointLock\n"
             f"with CheckpointLock({str(out / 'checkpoint.h5')!r}):\n"
             "    print('held', flush=True); time.sleep(60)\n")
     holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
@@ -408,11 +408,11 @@ def test_class_non_convergence_the_proposal_maps_the_population_through_product_
     u = log theta enters the subjects' proposals through du/dz, whose beta0 row is, from the
     card, d log beta0 = dX / X - d log tau0 + 2/3 d log E_star (the old proposal treated z as
     log theta or theta and accepted 0.5% of a 3-subject population's draws)."""
-    from skinfit.data import load_dataset
-    from skinfit.hierarchical import Spec, _Subjects
-    from skinfit.models import load_model
+    from skinfit.io.data import load_dataset
+    from skinfit.analysis.population.hierarchical import Spec, _Subjects
+    from skinfit.io.models import load_model
     from skinfit.posterior import Posterior
-    from skinfit.priors import load_priors
+    from skinfit.io.priors import load_priors
 
     post = Posterior(load_model("electroadhesion"), load_priors("electroadhesion"),
                      load_dataset("electroadhesion_synthetic"))

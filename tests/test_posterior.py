@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 import skinfit
-from skinfit.optimize import find_map
+from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
 
 
@@ -135,7 +135,7 @@ def _contact_area_by_subject(noise):
     prior per observable)."""
     from types import MappingProxyType
 
-    from skinfit.priors import PriorSet, parse_prior
+    from skinfit.io.priors import PriorSet, parse_prior
 
     priors = skinfit.load_priors("contact_area")
     nu = {f"nu_{o}": parse_prior(f"nu_{o}", {"dist": "gamma", "shape": 2, "scale": 10, "bounds": [1, 200],

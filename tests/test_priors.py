@@ -8,7 +8,7 @@ import pytest
 from scipy import integrate, stats
 
 import skinfit
-from skinfit.priors import parse_prior
+from skinfit.io.priors import parse_prior
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 PRIOR_FILES = sorted(p.stem for p in (ROOT / "priors").glob("*.toml"))

@@ -6,7 +6,7 @@ import pytest
 from scipy import stats
 from scipy.special import logsumexp
 
-from skinfit.proposal import MixtureT, fit_mixture
+from skinfit.inference.proposal import MixtureT, fit_mixture
 
 
 def _two_components():

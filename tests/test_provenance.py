@@ -15,10 +15,10 @@ import pandas as pd
 import pytest
 
 import skinfit
-import skinfit.paths
-import skinfit.registry
-from skinfit.cli import main
-from skinfit.provenance import ShadowWarning
+import skinfit.io.paths
+import skinfit.io.registry
+from skinfit.apps.cli import main
+from skinfit.io.provenance import ShadowWarning
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL, DATA = "electroadhesion_coulomb", "electroadhesion_synthetic"
@@ -35,9 +35,9 @@ def user(tmp_path, monkeypatch):
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
     monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
     monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
-    skinfit.paths.set_search_path([])
+    skinfit.io.paths.set_search_path([])
     yield tmp_path / "user"
-    skinfit.paths.set_search_path([])
+    skinfit.io.paths.set_search_path([])
 
 
 def _fit(argv, capsys):

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 import skinfit
-from skinfit.references import check_source, cite, parse_source, references
+from skinfit.io.references import check_source, cite, parse_source, references
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 FILES = sorted([*ROOT.glob("models/*.toml"), *ROOT.glob("priors/*.toml")])
@@ -63,7 +63,7 @@ def test_an_unknown_key_is_refused_at_load(tmp_path):
 
 
 def test_a_references_file_on_the_search_path_adds_keys(tmp_path, monkeypatch):
-    import skinfit.paths
+    import skinfit.io.paths
 
     (tmp_path / "references.toml").write_text('schema_version = 1\n[mylab2026]\ntitle = "Our own model"\n'
                                               'authors = ["A. Researcher"]\nyear = 2026\n')

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 import skinfit
-from skinfit import registry
+from skinfit.io import registry
 from skinfit.errors import InputError
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

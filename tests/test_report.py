@@ -16,8 +16,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit import report
-from skinfit.cli import main
+from skinfit.report import html as report
+from skinfit.apps.cli import main
 
 
 class _Page(HTMLParser):
@@ -201,7 +201,7 @@ def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_
     report does not take is refused."""
     import multiprocessing
 
-    from skinfit.workers import forkable
+    from skinfit.inference.workers import forkable
 
     _, comparison = written
     calls = []
@@ -286,7 +286,7 @@ def test_tables_hold_the_saved_numbers(written, ea_fit, rival):
                 else:
                     assert float(got) == pytest.approx(want, rel=1e-5, abs=0), (key, name, col)
                     assert f"| {got} |" in md or f"| {got} " in md
-        units = skinfit.plots.parameter_units(fit)
+        units = skinfit.plots.figures.parameter_units(fit)
         assert list(shown["unit"]) == [units[n.split("[")[0]] for n in summary.index]
         # the CSV is the summary itself, to the last bit
         csv = pd.read_csv(out / f"{key}_summary.csv", index_col=0, keep_default_na=False)
@@ -344,7 +344,7 @@ def test_cli_report_from_run_directories(rival, tmp_path, capsys):
 
 _REUSED_REPORT = """
 import json, sys
-from skinfit.cli import main
+from skinfit.apps.cli import main
 
 assert main(["report", sys.argv[1], "--out", sys.argv[2]]) == 0
 heavy = ("arviz_stats", "arviz_plots", "matplotlib", "emcee", "nlopt", "scipy.stats")
@@ -367,7 +367,7 @@ def test_a_report_with_nothing_to_draw_reads_the_stored_summary_and_imports_no_s
     path = ea_fit.save(run / "fit.nc")
     tree = xr.open_datatree(path).load()
     del tree.attrs["summary"]
-    from skinfit import integrity
+    from skinfit.io import integrity
 
     integrity.stamp(tree)  # the file without a stored summary, with the checksums of its content
     tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
@@ -390,8 +390,9 @@ def test_a_report_with_nothing_to_draw_reads_the_stored_summary_and_imports_no_s
 _KILLED_REPORT = """
 import os, sys, time
 from pathlib import Path
-from skinfit import plots, report
-from skinfit.fit import load_fit
+from skinfit.plots import figures as plots
+from skinfit.report import html as report
+from skinfit.results.fit import load_fit
 
 os.cpu_count = lambda: 2  # two figure workers even on a one-core machine
 
@@ -447,8 +448,8 @@ def test_figure_workers_end_when_the_report_process_is_killed(ea_fit, tmp_path):
 
 _FROZEN = """
 import concurrent.futures, gc, json, os, sys
-from skinfit import report
-from skinfit.fit import load_fit
+from skinfit.report import html as report
+from skinfit.results.fit import load_fit
 
 os.cpu_count = lambda: 2  # forked figure workers even on one core
 frozen = []  # objects frozen when the workers are started
@@ -475,7 +476,7 @@ def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path):
     """The report freezes this process's objects while its forked workers draw, and unfreezes
     them after, so nothing it held stays out of the collector's reach (a leak in a long
     session); objects the caller had frozen itself stay frozen. In a new interpreter: one
-    without other threads, from which the report forks its workers (skinfit.workers.forkable)."""
+    without other threads, from which the report forks its workers (skinfit.inference.workers.forkable)."""
     import subprocess
 
     path = ea_fit.save(tmp_path / "fit.nc")
@@ -517,8 +518,9 @@ def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
 _REDRAW = """
 import gc, os, resource, sys
 from pathlib import Path
-from skinfit import plots, report
-from skinfit.fit import load_fit
+from skinfit.plots import figures as plots
+from skinfit.report import html as report
+from skinfit.results.fit import load_fit
 
 if sys.argv[2] == "worker":
     report._init_worker(os.getppid())  # as a figure worker starts
@@ -599,7 +601,7 @@ def test_a_report_into_its_folder_again_leaves_no_stale_table_and_waits_for_no_o
     another holds the folder is refused with one line."""
     import os
 
-    from skinfit.checkpoint import CheckpointLock
+    from skinfit.inference.checkpoint import CheckpointLock
 
     coulomb = skinfit.fit("electroadhesion_coulomb", "electroadhesion_synthetic", rng=2, max_steps=300,
                           ess_target=50)

@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit import report
-from skinfit.report_groups import contrast_section, group_analyses, subject_label
+from skinfit.report import html as report
+from skinfit.report.groups import contrast_section, group_analyses, subject_label
 
 SUBJECTS = ("S01", "S02", "S03")
 
@@ -109,7 +109,7 @@ def test_the_report_says_when_evidence_and_loo_rank_models_differently():
 
 def test_population_band_is_where_94_percent_of_subjects_lie():
     """Log-normal population exp(Normal(mu, tau)): median exp(mu), 94% range exp(mu -+ 1.881 tau)."""
-    from skinfit.report_groups import PopulationView
+    from skinfit.report.groups import PopulationView
 
     class Result:
         parameters, subjects = ["E"], ["S01"]
@@ -131,7 +131,7 @@ def test_population_band_is_where_94_percent_of_subjects_lie():
 def test_a_report_section_computes_the_population_summary_once():
     """The hyper-parameters' summary (with R-hat and ESS of each, ~50 ms) is read per parameter
     by the report: computed once per section, each parameter's band still its own."""
-    from skinfit.report_groups import population_section
+    from skinfit.report.groups import population_section
 
     class Result:
         parameters, subjects, calls = ["E", "F", "G"], ["S01"], 0
@@ -174,8 +174,8 @@ def test_report_of_a_run_shows_the_population_saved_for_its_fits_and_never_anoth
     """`skinfit population RUN` (the user's choices: two parameters, correlated) then `skinfit
     report RUN`: the report shows that population, saying where it is from; once a subject is
     fitted again, the saved one is named as made from other fits and not shown."""
-    from skinfit.cli import main
-    from skinfit.population import load_population
+    from skinfit.apps.cli import main
+    from skinfit.analysis.population.population import load_population
 
     run = _by_run(subject_fits, tmp_path / "run")
     with warnings.catch_warnings():
@@ -221,7 +221,7 @@ def test_a_report_population_has_every_parameter_but_the_noise_scales(subject_fi
 
 
 def test_the_population_sampler_and_hyper_priors_read_as_text_and_a_table():
-    from skinfit.report_groups import hyperprior_table, sampler_text
+    from skinfit.report.groups import hyperprior_table, sampler_text
 
     gibbs = {"method": "gibbs (Metropolis-within-Gibbs)", "chains": 8, "sweeps": 2442, "burn": 300, "thin": 3,
              "converged": True, "checks": [{"sweeps": 400, "ess_bulk": 66.4}], "acceptance": {"a": 0.613, "b": 0.587},
@@ -244,7 +244,7 @@ def test_the_population_sampler_and_hyper_priors_read_as_text_and_a_table():
 def test_a_saved_population_that_does_not_record_its_fits_is_named_not_shown(subject_fits):
     from dataclasses import replace
 
-    from skinfit.population import population
+    from skinfit.analysis.population.population import population
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -289,7 +289,7 @@ def test_tables_whose_names_differ_only_in_letters_a_file_name_cannot_hold_get_t
     """Two contrast tables titled by subjects Zoë and Zoé (file_part makes both Zo_): each is
     written to its own CSV, linked from its own section, holding its own rows; nothing is
     overwritten."""
-    from skinfit.contrasts import contrast
+    from skinfit.analysis.contrasts import contrast
     from test_report import _parse
 
     rng = np.random.default_rng(3)
@@ -333,7 +333,7 @@ def _top(index):
 
 def _unconverged_population(fits):
     """The population of ``fits`` run for 30 sweeps: it cannot converge (R-hat far above 1.01)."""
-    from skinfit.population import population
+    from skinfit.analysis.population.population import population
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -458,8 +458,8 @@ def test_fits_with_the_same_options_are_told_apart_by_their_file_then_their_cont
     """Two files of one fit's content: labelled by the shortest part of their paths that differs;
     two fits in memory with the same options but other draws (another ESS target): by their
     content's sha256; the same fit twice: numbered."""
-    from skinfit.compare import compare
-    from skinfit.run_labels import run_labels
+    from skinfit.analysis.compare import compare
+    from skinfit.results.run_labels import run_labels
 
     fit = subject_fits["S01"]
     for folder in ("a", "b"):

@@ -8,11 +8,11 @@ import emcee
 import numpy as np
 
 import skinfit
-from skinfit import sampling
-from skinfit.optimize import find_map
+from skinfit.inference import sampling
+from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
-from skinfit.proposal import MixtureT
-from skinfit.sampling import ADAPT_FIRST, initial_ball, integrated_time, run_emcee
+from skinfit.inference.proposal import MixtureT
+from skinfit.inference.sampling import ADAPT_FIRST, initial_ball, integrated_time, run_emcee
 
 BENCH_PRIORS = Path(__file__).parents[1] / "bench" / "priors_electroadhesion_uniform.toml"
 
@@ -112,7 +112,7 @@ def test_importance_start_improves_a_poor_proposal_and_places_walkers(rng):
     Monte Carlo rounds raise the effective sample size of the importance weights, and the
     walkers are distinct draws inside the support; from a hopeless proposal (far away), no
     walkers are returned and the caller falls back to the ball around the MAP."""
-    from skinfit.sampling import IMPORTANCE_GOOD, importance_start
+    from skinfit.inference.sampling import IMPORTANCE_GOOD, importance_start
 
     target = _Gaussian()
     sd = np.sqrt(np.diag(target.cov))
@@ -131,7 +131,7 @@ def test_importance_start_improves_a_poor_proposal_and_places_walkers(rng):
 def test_tempered_rounds_find_a_posterior_far_from_the_proposal(rng):
     """A proposal 50 sd off the target, whose weights are degenerate: tempered refits walk it to
     the target, and the walkers start in its typical set (their mean within 0.5 sd of the target's)."""
-    from skinfit.sampling import IMPORTANCE_MIN_ESS, importance_start
+    from skinfit.inference.sampling import IMPORTANCE_MIN_ESS, importance_start
 
     target = _Gaussian()
     sd = np.sqrt(np.diag(target.cov))
@@ -162,8 +162,8 @@ def test_importance_start_widens_a_laplace_proposal_at_a_cusp(rng):
     IMPORTANCE_MIN_ESS, place walkers, and return a proposal whose importance-weighted draws
     have the closed-form standard deviation sqrt(2) b_i along each axis u_i (the walkers, from
     the Laplace ball, had 1/40 of it)."""
-    from skinfit.optimize import laplace_covariance
-    from skinfit.sampling import IMPORTANCE_MIN_ESS, importance_start
+    from skinfit.inference.optimize import laplace_covariance
+    from skinfit.inference.sampling import IMPORTANCE_MIN_ESS, importance_start
 
     target = _Cusp()
     cov = laplace_covariance(target, target.m)

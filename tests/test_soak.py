@@ -26,7 +26,7 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.campaign import load_campaign, run_campaign, run_fit
+from skinfit.apps.campaign import load_campaign, run_campaign, run_fit
 
 SEED = int(os.environ.get("SKINFIT_TEST_SEED", "21"))
 
@@ -40,7 +40,7 @@ def _campaign(folder, name, data, *, seed=5, ess=100, models=("electroadhesion_c
 
 def _spawn(path, *args):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "skinfit.cli", "campaign", str(path), *args],
+    return subprocess.Popen([sys.executable, "-m", "skinfit.apps.cli", "campaign", str(path), *args],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
 
 
@@ -77,7 +77,7 @@ def check_complete(campaign, reference):
 
 def _reference(folder, data, name, **kw):
     """The draws of an uninterrupted run of a campaign like ``name``: each fit run in this
-    process, one after the other (:func:`skinfit.campaign.run_fit`, no executor)."""
+    process, one after the other (:func:`skinfit.apps.campaign.run_fit`, no executor)."""
     campaign = load_campaign(_campaign(folder, f"{name}_ref", data, **kw))
     result = {}
     for task in campaign.tasks:

@@ -18,8 +18,8 @@ def _loaded(code):
     return set(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
-@pytest.mark.parametrize("code", ["import skinfit", "import skinfit.cli",
-                                  "from skinfit.cli import main\nmain(['models'])"])
+@pytest.mark.parametrize("code", ["import skinfit", "import skinfit.apps.cli",
+                                  "from skinfit.apps.cli import main\nmain(['models'])"])
 def test_import_skinfit_and_the_cli_load_no_arviz_matplotlib_dask_or_jinja2(code):
     loaded = _loaded(code)
     assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
@@ -27,17 +27,17 @@ def test_import_skinfit_and_the_cli_load_no_arviz_matplotlib_dask_or_jinja2(code
 
 
 def test_fitting_modules_load_no_arviz_plots_matplotlib_or_jinja2():
-    loaded = _loaded("import skinfit.fit, skinfit.compare, skinfit.evidence, skinfit.contrasts, skinfit.groups")
+    loaded = _loaded("import skinfit.results.fit, skinfit.compare, skinfit.evidence, skinfit.contrasts, skinfit.analysis.groups")
     assert not loaded & {"arviz", "arviz_plots", "matplotlib", "jinja2", "dask", "distributed"}
 
 
 def test_public_names_resolve_lazily_to_the_functions_not_the_submodules():
     code = ("import skinfit, skinfit.fit, skinfit.compare, skinfit.evidence, types\n"
             "assert callable(skinfit.fit) and not isinstance(skinfit.fit, types.ModuleType)\n"
-            "assert skinfit.fit is sys.modules['skinfit.fit'].fit\n"
-            "assert skinfit.compare is sys.modules['skinfit.compare'].compare\n"
-            "assert skinfit.evidence is sys.modules['skinfit.evidence'].evidence\n"
-            "assert skinfit.Fit is sys.modules['skinfit.fit'].Fit\n"
+            "assert skinfit.fit is sys.modules['skinfit.results.fit'].fit\n"
+            "assert skinfit.compare is sys.modules['skinfit.analysis.compare'].compare\n"
+            "assert skinfit.evidence is sys.modules['skinfit.analysis.evidence'].evidence\n"
+            "assert skinfit.Fit is sys.modules['skinfit.results.fit'].Fit\n"
             "assert set(skinfit.__all__) <= set(dir(skinfit))")
     subprocess.run([sys.executable, "-c", "import sys\n" + code], check=True)
 
@@ -48,9 +48,9 @@ def test_skinfit_fit_builds_no_unit_registry_and_imports_no_dask_or_pint(tmp_pat
     (to look for a scheduler), nor by xarray's first array (for their array types);
     afterwards ``distributed`` imports as usual, and the file holds every group."""
     out = tmp_path / "run"
-    code = (f"from skinfit.cli import main\nassert main(['fit', 'electroadhesion', 'electroadhesion_synthetic', "
+    code = (f"from skinfit.apps.cli import main\nassert main(['fit', 'electroadhesion', 'electroadhesion_synthetic', "
             f"'--out', {str(out)!r}, '--seed', '1', '--quiet']) == 0\n"
-            "import skinfit.units\nprint('registry', skinfit.units._REGISTRY)\n"
+            "import skinfit.io.units\nprint('registry', skinfit.io.units._REGISTRY)\n"
             "print('distributed imported', 'distributed' in sys.modules)\n"
             "print('dask or pint imported', sorted({m.split('.')[0] for m in sys.modules} & {'dask', 'pint'}))\n"
             "import distributed\n")
@@ -58,7 +58,7 @@ def test_skinfit_fit_builds_no_unit_registry_and_imports_no_dask_or_pint(tmp_pat
     result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert "registry None" in result.stdout and "distributed imported False" in result.stdout
     assert "dask or pint imported []" in result.stdout
-    from skinfit.fit import GROUPS, load_fit
+    from skinfit.results.fit import GROUPS, load_fit
 
     fit = load_fit(out)
     assert set(fit.idata.children) == set(GROUPS) - {"derived"} and fit.attr("misfit")["checks"]
@@ -70,7 +70,7 @@ def test_xarray_still_tells_dask_arrays_and_pint_quantities_apart_after_skinfit_
     kept and taken off by xarray, not stripped by numpy), and a fit saved then holds the same."""
     code = ("import numpy as np, skinfit.fit, xarray as xr\n"
             "x = xr.DataArray(np.arange(3.0), dims='i').sum()\n"
-            "fit = sys.modules['skinfit.fit'].load_fit(sys.argv[1])\n"
+            "fit = sys.modules['skinfit.results.fit'].load_fit(sys.argv[1])\n"
             "fit.save(sys.argv[2])\n"
             "assert not {m.split('.')[0] for m in sys.modules} & {'dask', 'pint'}\n"
             "from xarray.namedarray import pycompat\n"
@@ -109,7 +109,7 @@ def test_a_saved_fits_figures_import_what_each_needs(ea_fit, tmp_path):
     prior-against-posterior plot, which draws the densities, imports scipy.stats."""
     path = tmp_path / "fit.nc"
     ea_fit.save(path)
-    code = ("import sys\nfrom skinfit.fit import load_fit\nfrom skinfit import plots\n"
+    code = ("import sys\nfrom skinfit.results.fit import load_fit\nfrom skinfit import plots\n"
             "fit = load_fit(sys.argv[1])\n"
             "plots.plot_trace(fit), plots.plot_pair(fit)\n"
             "print('trace, pair:', 'scipy.stats' in sys.modules)\n"

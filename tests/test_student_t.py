@@ -13,9 +13,9 @@ import pytest
 from scipy import stats
 
 import skinfit
-from skinfit.cli import main
+from skinfit.apps.cli import main
 from skinfit.posterior import Posterior
-from skinfit.references import parse_source, references
+from skinfit.io.references import parse_source, references
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 

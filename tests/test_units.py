@@ -7,8 +7,8 @@ import random
 
 import pytest
 
-from skinfit import units
-from skinfit.units import parse_unit
+from skinfit.io import units
+from skinfit.io.units import parse_unit
 
 POWERS = (-3, -2, -1, 1, 2, 3)
 

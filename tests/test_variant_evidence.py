@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.demo import DEMO_OPTIONS, _select
-from skinfit.optimize import find_map
+from skinfit.apps.demo import DEMO_OPTIONS, _select
+from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
 
 FAMILIES = {}

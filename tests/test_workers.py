@@ -19,7 +19,7 @@ import pytest
 
 import skinfit
 from skinfit.errors import InputError, MissingDependency, Portable, WorkerError, error_line, portable
-from skinfit.workers import THREAD_VARIABLES, check_scheduler, run_isolated
+from skinfit.inference.workers import THREAD_VARIABLES, check_scheduler, run_isolated
 from worker_jobs import die_on, instance, raise_instance, threads_in_worker, zero_force
 
 
@@ -71,7 +71,7 @@ def _same(a, b):
 
 
 def test_the_classes_found_include_those_a_worker_raises():
-    from skinfit.optimize import MAPError
+    from skinfit.inference.optimize import MAPError
 
     assert {InputError, MissingDependency, MAPError, WorkerError, skinfit.ConvergenceWarning, ValueError} <= set(CLASSES)
 
@@ -98,7 +98,7 @@ def test_exception_class_raised_in_a_worker_process_reaches_the_parent(spawned, 
 def test_map_error_crosses_with_its_result_and_message(tmp_path, spawned):
     """The MAP of data with a zero normal force (impossible for the electroadhesion model) fails
     with MAPError(message, result): it reaches the parent whole, the rows it names included."""
-    from skinfit.optimize import MAPError
+    from skinfit.inference.optimize import MAPError
 
     with pytest.raises(MAPError) as info:
         skinfit.fit("electroadhesion", zero_force(tmp_path), rng=1, progress=False)
@@ -198,7 +198,7 @@ def test_dask_scheduler_without_dask_installed_names_the_extra(monkeypatch):
 
 def test_campaign_imports_without_the_unix_resource_module():
     code = ("import sys; sys.modules['resource'] = None\n"  # as on Windows: import resource -> ImportError
-            "import skinfit.campaign as c, math; assert c.resource is None and math.isnan(c._peak_rss_mb()); "
+            "import skinfit.apps.campaign as c, math; assert c.resource is None and math.isnan(c._peak_rss_mb()); "
             "print('ok')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
@@ -207,7 +207,7 @@ def test_campaign_imports_without_the_unix_resource_module():
 def test_forkable_only_without_other_threads():
     """In a new interpreter (no thread but the main one): forkable; with a thread started, not;
     after it ends, forkable again."""
-    code = ("import threading; from skinfit.workers import forkable\n"
+    code = ("import threading; from skinfit.inference.workers import forkable\n"
             "a = forkable(); e = threading.Event(); t = threading.Thread(target=e.wait); t.start()\n"
             "b = forkable(); e.set(); t.join(); print(a, b, forkable())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -218,8 +218,8 @@ def test_forkable_only_without_other_threads():
 @pytest.mark.parametrize("entry", ["run_sbc", "run_demo"])
 @pytest.mark.parametrize("jobs", [0, -2, "2", 1.5, True])
 def test_process_counts_of_the_python_entry_points_are_checked_before_any_work(entry, jobs, tmp_path):
-    from skinfit.demo import run_demo
-    from skinfit.sbc import run_sbc
+    from skinfit.apps.demo import run_demo
+    from skinfit.analysis.sbc import run_sbc
 
     call = {"run_sbc": lambda: run_sbc("electroadhesion_coulomb", n_sims=2, jobs=jobs),
             "run_demo": lambda: run_demo(tmp_path / "d", tmp_path / "r", jobs=jobs)}[entry]

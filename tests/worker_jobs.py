@@ -39,9 +39,9 @@ def die_on(item):
 
 
 def threads_in_worker(threads):
-    """The most threads a BLAS library has inside :func:`skinfit.workers.limited_threads` (which
+    """The most threads a BLAS library has inside :func:`skinfit.inference.workers.limited_threads` (which
     loads scipy's BLAS, as a fit does) and after it."""
-    from skinfit.workers import limited_threads, thread_count
+    from skinfit.inference.workers import limited_threads, thread_count
 
     with limited_threads(threads):
         inside = thread_count()

@@ -1,0 +1,1 @@
+"""The population (hierarchical) model over per-subject fits."""

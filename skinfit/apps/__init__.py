@@ -1,0 +1,1 @@
+"""Front ends: the command line, campaigns (processes or Dask) and the demo."""

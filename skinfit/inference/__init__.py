@@ -1,0 +1,2 @@
+"""Knows nothing about skin: the MAP start (nlopt), the proposal, emcee moves and
+sampling, checkpoints, the guard rails on a run, worker processes."""

@@ -1,0 +1,75 @@
+"""Units and long names of every variable of a fit's result tree (CF-style ``units`` and
+``long_name`` attrs): parameters and data in the SI units they are stored in."""
+
+import json
+import tomllib
+
+from skinfit.io.units import si_unit
+
+__all__ = ["variable_attrs", "annotate", "noise_suffix", "parameter_units", "derived_units"]
+
+
+def noise_suffix(observables, obs):
+    """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
+    return "" if len(observables) == 1 else f"_{obs}"
+
+
+def derived_units(fit):
+    """Derived quantity name -> SI unit, as the model card's ``[derived]`` table states them
+    (recorded in a fit's root attribute ``derived``); empty for a card that derives none."""
+    return json.loads(fit.attrs["derived"])["quantities"] if "derived" in fit.attrs else {}
+
+
+def parameter_units(fit):
+    """Parameter (or noise parameter, or derived quantity) name -> SI unit as stated in the
+    model card, from a fit's root attributes (``fit.attrs``: ``model_card``, ``setup``, and
+    ``derived`` when the card derives quantities)."""
+    card = tomllib.loads(fit.attrs["model_card"])
+    units = {p["name"]: p["unit"] for p in card.get("parameters", [])}
+    for name, unit in derived_units(fit).items():
+        units.setdefault(name, unit)
+    obs_units = {o["name"]: o["unit"] for o in card.get("observables", [])}
+    setup = json.loads(fit.attrs["setup"])
+    observables = setup["observables"]
+    for o in observables:
+        suffix = noise_suffix(observables, o)
+        units[f"sigma{suffix}"] = "1" if setup["noise"].get(o) == "lognormal" else obs_units.get(o, "1")
+        units[f"nu{suffix}"] = "1"
+    return units
+
+
+def variable_attrs(post):
+    """name -> {"units": SI unit, "long_name": text} for the parameters, noise parameters,
+    observables, covariates and other data columns of Posterior ``post``."""
+    model, out = post.model, {}
+    for q in (*model.parameters, *model.observables, *model.covariates):
+        out[q.name] = {"units": q.unit, "long_name": q.name.replace("_", " ")
+                       + (f": {q.description}" if q.description else "")}
+    for o in post.observables:
+        unit = next(q.unit for q in model.observables if q.name == o)
+        suffix = noise_suffix(post.observables, o)
+        lognormal = post.noise[o] == "lognormal"
+        out[f"sigma{suffix}"] = {"units": "1" if lognormal else unit,
+                                 "long_name": f"noise scale of {o}" + (" (of its log)" if lognormal else "")}
+        out[f"nu{suffix}"] = {"units": "1", "long_name": f"Student-t degrees of freedom of the noise of {o}"}
+    for c in post.dataset.columns:
+        if c.name not in out:
+            out[c.name] = {"units": si_unit(c.unit) if c.unit else "", "long_name": c.name.replace("_", " ")}
+    if model.derived:
+        for name, unit in model.derived["quantities"].items():
+            out[name] = {"units": unit, "long_name": f"{name.replace('_', ' ')} (derived)"}
+    return out
+
+
+def annotate(tree, post):
+    """Set ``units`` and ``long_name`` on every variable of ``tree`` (a DataTree) that
+    :func:`variable_attrs` knows; the log-likelihood's values are in nats."""
+    attrs = variable_attrs(post)
+    for group in tree.children:
+        node = tree[group]
+        for var in node.data_vars:
+            if group == "log_likelihood":
+                node[var].attrs.update({"units": "1", "long_name": f"pointwise log-likelihood of {var} (nats)"})
+            elif var in attrs:
+                node[var].attrs.update(attrs[var])
+    return tree

@@ -1,0 +1,378 @@
+"""Model cards (models/<id>.toml): validated at load time into frozen Model objects.
+
+A card names its forward function (and ``[sampling]`` / ``[derived]`` functions) as
+``module:function`` or a registered name; only functions registered for that role in
+:mod:`skinfit.io.registry` can be named (nothing in a card is evaluated as code).  Units on a
+card are SI (:func:`skinfit.io.units.check_model_unit`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # names used only in annotations
+    import os
+    from collections.abc import Mapping
+    import pandas as pd
+    from numpy.typing import ArrayLike
+
+import math
+import re
+import warnings
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+
+from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
+from skinfit.errors import InputError, SupportWarning
+from skinfit.io.forward_check import forward_error, validated
+from skinfit.io.registry import resolve
+from skinfit.io.units import check_model_unit
+
+__all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "check_id", "NOISE_MODELS"]
+
+NOISE_MODELS = ("normal", "student_t", "lognormal")
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A named observable, covariate or parameter of a model card."""
+
+    name: str
+    unit: str
+    description: str = ""
+    noise: str | None = None  # observables only
+    optional: bool = False  # covariates only: NaN allowed by design
+    physical: tuple = (-math.inf, math.inf)  # parameters only: the range the physics allows
+
+
+def resolve_forward(ref, where="forward", role="forward"):
+    """The function a card names for ``role`` (forward, shear, shift, derived), looked up in
+    :mod:`skinfit.io.registry`; InputError naming ``where`` if it is not registered for that role."""
+    return resolve(role, ref, where)
+
+
+_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,127}")
+
+
+def check_id(value, where, field="id"):
+    """An id is a name (it becomes a folder or file name): letters, digits, ``_ . + -``, no path."""
+    if not isinstance(value, str) or not _ID.fullmatch(value) or ".." in value:
+        raise InputError(where, f"expected a name of letters, digits, '_', '.', '+', '-' (no '/', '..' or "
+                         f"spaces; it names files and folders) (got {value!r})", field=field)
+    return value
+
+
+@dataclass(frozen=True)
+class Model:
+    """A published model: its forward function and what its card says about it."""
+
+    id: str
+    title: str
+    source: str
+    forward_ref: str
+    observables: tuple
+    covariates: tuple
+    parameters: tuple
+    constants: MappingProxyType
+    constant_sources: MappingProxyType
+    variants: tuple = ()
+    support: str = ""
+    split: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    plot: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    shear: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    linear: tuple = ()  # parameters sampled in natural units although positive
+    shift: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))  # name -> function of constants
+    product: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))  # name -> {partner: exponent}
+    derived: MappingProxyType = field(default_factory=lambda: MappingProxyType({}))
+    path: str = ""
+    sha256: str = ""
+    card_text: str = ""
+    file: str = ""  # the absolute path of the card read ("" when not read from a file)
+
+    @property
+    def forward(self):
+        return resolve("forward", self.forward_ref, self.path)
+
+    @property
+    def parameter_names(self):
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def observable_names(self):
+        return tuple(o.name for o in self.observables)
+
+    @property
+    def covariate_names(self):
+        return tuple(c.name for c in self.covariates)
+
+    def evaluate(self, params, covariates, constants=None):
+        """Raw forward call: ``(y, ok)`` with ``y`` a dict of (k, n) arrays, ``ok`` bool (k, n).
+
+        ``params`` values broadcast to (k, n); ``covariates`` is a mapping of (n,) SI arrays.
+        """
+        c = dict(self.constants)
+        if constants:
+            c.update(constants)
+        y, ok = self.forward(params, covariates, c)
+        return y, ok
+
+    def derive(self, params, covariates, constants=None):
+        """Derived quantities of the card's ``[derived]`` table: dict name -> array (k, n)."""
+        c = {**self.constants, **(constants or {})}
+        out = resolve("derived", self.derived["function"], self.path)(params, covariates, c)
+        if set(out) != set(self.derived["quantities"]):
+            raise InputError(self.path, f"{self.derived['function']} returns {sorted(out)}, the card "
+                             f"declares {sorted(self.derived['quantities'])}", field="derived.quantities")
+        return out
+
+    def predict(self, params: Mapping[str, ArrayLike], data: pd.DataFrame | Mapping[str, ArrayLike], *,
+                constants: Mapping[str, float] | None = None, return_valid: bool = False):
+        """Predicted observable(s) at the covariates of ``data``.
+
+        Parameters
+        ----------
+        params : mapping name -> float or array of shape (k,)
+            An ensemble of k parameter vectors (SI units); floats give one vector.
+        data : pandas.DataFrame or mapping of (n,) arrays
+            SI covariates, columns named as in the model card.
+
+        Returns
+        -------
+        ndarray of shape (n,) when every parameter is a float, else (k, n); a dict of such
+        arrays (keyed by observable) for a model with several observables.  Points outside the
+        model's physical support are NaN and a :class:`SupportWarning` says so (or pass
+        ``return_valid=True`` to get ``(y, valid)`` instead).
+        """
+        missing = set(self.parameter_names) - set(params)
+        if missing:
+            raise InputError(f"model {self.id}", f"missing parameters {sorted(missing)}",
+                             field="params")
+        scalar = all(np.ndim(params[name]) == 0 for name in self.parameter_names)
+        p = {}
+        for name in self.parameter_names:
+            try:
+                p[name] = np.asarray(params[name], dtype=float).reshape(-1, 1)
+            except (TypeError, ValueError):
+                raise InputError(f"model {self.id}", f"expected a number or an array of numbers (got "
+                                 f"{type(params[name]).__name__})", field=f"params.{name}") from None
+            if not np.isfinite(p[name]).all():
+                raise InputError(f"model {self.id}", "expected finite numbers (got NaN or inf)", field=f"params.{name}")
+        x = {}
+        for cov in self.covariates:
+            if cov.name not in data:
+                raise InputError(f"model {self.id}", f"data has no covariate column {cov.name!r} "
+                                 f"[{cov.unit}]", field="data")
+            x[cov.name] = np.asarray(data[cov.name], dtype=float)
+        n = len(next(iter(x.values()))) if x else len(data)
+        k = max((v.shape[0] for v in p.values()), default=1)
+        y, valid = validated(self, self.evaluate(p, x, constants), k, n, self.observable_names,
+                             "called by predict()")
+        out = {}
+        for name, arr in y.items():
+            if (valid & ~np.isfinite(arr)).any():
+                i, j = np.argwhere(valid & ~np.isfinite(arr))[0]
+                raise forward_error(self, f"returned {arr[i, j]} for {name!r} at row {j + 1} of draw {i + 1}, a point "
+                                          "it marks valid (ok True): return ok False where the model is undefined")
+            arr[~valid] = np.nan  # (a new array: validated() copies)
+            out[name] = arr[0] if scalar else arr
+        valid = valid[0] if scalar else valid
+        if not return_valid and not np.all(valid):
+            warnings.warn(f"{self.id}: {np.size(valid) - np.count_nonzero(valid)} predictions lie "
+                          f"outside the physical support ({self.support}); returned as NaN",
+                          SupportWarning, stacklevel=2)
+        result = out[self.observables[0].name] if len(out) == 1 else out
+        return (result, valid) if return_valid else result
+
+    def __repr__(self):
+        return f"Model({self.id!r}, parameters={list(self.parameter_names)})"
+
+
+def _quantities(doc, key, where, *, observable=False):
+    items = require(doc, key, list, where, default=[] if key == "covariates" else ...)
+    out = []
+    for i, item in enumerate(items):
+        prefix = f"{key}[{i}]."
+        if not isinstance(item, dict):
+            raise InputError(where, "expected a table", field=f"{key}[{i}]")
+        name = require(item, "name", str, where, field_prefix=prefix)
+        unit = require(item, "unit", str, where, field_prefix=prefix)
+        reason = check_model_unit(unit)
+        if reason:
+            raise InputError(where, f"unknown unit {unit!r}: {reason}", field=prefix + "unit")
+        desc = require(item, "description", str, where, field_prefix=prefix, default="")
+        noise = None
+        if observable:
+            noise = require(item, "noise", str, where, field_prefix=prefix, default="normal")
+            if noise not in NOISE_MODELS:
+                raise InputError(where, f"unknown noise model {noise!r} (expected one of "
+                                 f"{', '.join(NOISE_MODELS)})", field=prefix + "noise")
+        optional = require(item, "optional", bool, where, field_prefix=prefix, default=False)
+        physical = (-math.inf, math.inf)
+        if key == "parameters" and "physical" in item:
+            physical = require(item, "physical", list, where, field_prefix=prefix)
+            if (len(physical) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              and not math.isnan(v) for v in physical)
+                    or not physical[0] < physical[1]):
+                raise InputError(where, f"expected [lower, upper] numbers with lower < upper, inf allowed "
+                                 f"(got {physical!r})", field=prefix + "physical")
+            physical = (float(physical[0]), float(physical[1]))
+        out.append(Quantity(name, unit, desc, noise, optional, physical))
+    names = [q.name for q in out]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise InputError(where, f"duplicate names {sorted(dup)}", field=key)
+    return tuple(out)
+
+
+_CACHE = {}
+
+
+def load_model(name: str | os.PathLike) -> Model:
+    """Load a model card by id (``models/<id>.toml``) or by path.
+
+    >>> load_model("electroadhesion").parameter_names[:3]
+    ('E_star', 'tau0', 'd_air')
+    """
+    path = find_file("models", name)
+    digest = sha256_file(path)
+    key = (str(path.resolve()), digest)
+    if key not in _CACHE:
+        _CACHE[key] = _parse_model(path, digest)
+    return _CACHE[key]
+
+
+def _parse_model(path, digest):
+    _, text = read_toml(path)
+    model = replace(_parse_model_text(text, _display(path), digest), file=str(Path(path).resolve()))
+    from skinfit.io.references import check_source
+
+    check_source(model.source, model.path, "source")  # keys into references.toml
+    for cname, source in model.constant_sources.items():
+        if source:
+            check_source(source, model.path, f"constants.{cname}.source")
+    return model
+
+
+def check_constant(name, value, where):
+    """A model constant as a float, or InputError: every constant of a card (permittivities,
+    thicknesses, radii, Poisson's ratios, exponents) is a finite number > 0."""
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+        raise InputError(where, f"expected a finite number > 0 (got {value!r})", field=f"constants.{name}")
+    return float(value)
+
+
+def _parse_model_text(text, where, digest):
+    import tomllib
+
+    doc = tomllib.loads(text)
+    constants, sources = {}, {}
+    for cname, spec in require(doc, "constants", dict, where, default={}).items():
+        if isinstance(spec, dict):
+            value = require(spec, "value", float, where, field_prefix=f"constants.{cname}.")
+            sources[cname] = spec.get("source", "")
+            unit = require(spec, "unit", str, where, field_prefix=f"constants.{cname}.", default="1")
+            reason = check_model_unit(unit)
+            if reason:
+                raise InputError(where, f"unknown unit {unit!r}: {reason}", field=f"constants.{cname}.unit")
+        elif isinstance(spec, (int, float)) and not isinstance(spec, bool):
+            value = float(spec)
+        else:
+            raise InputError(where, f"expected a number or {{value=..., unit=..., source=...}} "
+                             f"(got {spec!r})", field=f"constants.{cname}")
+        constants[cname] = check_constant(cname, value, where)
+    sampling = require(doc, "sampling", dict, where, default={})
+    model = Model(
+        id=check_id(require(doc, "id", str, where), where),
+        title=require(doc, "title", str, where),
+        source=require(doc, "source", str, where),
+        forward_ref=require(doc, "forward", str, where),
+        observables=_quantities(doc, "observables", where, observable=True),
+        covariates=_quantities(doc, "covariates", where),
+        parameters=_quantities(doc, "parameters", where),
+        constants=MappingProxyType(constants),
+        constant_sources=MappingProxyType(sources),
+        variants=tuple(require(doc, "variants", list, where, default=[])),
+        support=require(doc, "support", str, where, default=""),
+        split=MappingProxyType(dict(require(doc, "split", dict, where, default={}))),
+        plot=MappingProxyType(dict(require(doc, "plot", dict, where, default={}))),
+        shear=MappingProxyType(dict(require(sampling, "shear", dict, where, field_prefix="sampling.", default={}))),
+        linear=tuple(require(sampling, "linear", list, where, field_prefix="sampling.", default=[])),
+        shift=MappingProxyType(dict(require(sampling, "shift", dict, where, field_prefix="sampling.", default={}))),
+        product=MappingProxyType({k: MappingProxyType(dict(v)) if isinstance(v, dict) else v for k, v in
+                                  require(sampling, "product", dict, where, field_prefix="sampling.",
+                                          default={}).items()}),
+        derived=_derived_table(doc, where),
+        path=where,
+        sha256=digest,
+        card_text=text,
+    )
+    if not model.observables:
+        raise InputError(where, "a model needs at least one observable", field="observables")
+    resolve("forward", model.forward_ref, where)
+    for pname, col in model.split.items():
+        if pname not in model.parameter_names:
+            raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
+    for pname in model.linear:
+        if pname not in model.parameter_names:
+            raise InputError(where, f"names unknown parameter {pname!r}", field="sampling.linear")
+    for kind, table in (("shear", model.shear), ("shift", model.shift)):
+        for pname, ref in table.items():
+            if pname not in model.parameter_names or not isinstance(ref, str):
+                raise InputError(where, f"expected parameter = 'module:function' of a registered {kind} "
+                                 f"function (got {pname} = {ref!r})", field=f"sampling.{kind}.{pname}")
+            resolve(kind, ref, where, field=f"sampling.{kind}.{pname}")
+    _check_products(model, where)
+    declared = [set(model.shear), set(model.shift), set(model.product), set(model.linear)]
+    for i, a in enumerate(declared):
+        for b in declared[i + 1:]:
+            if a & b:
+                raise InputError(where, f"{sorted(a & b)[0]!r} has two sampling coordinates: a parameter may "
+                                 f"be in at most one of shear, shift, product and linear", field="sampling")
+    return model
+
+
+def _check_products(model, where):
+    """``[sampling.product]``: parameter = {partner = exponent, ...}; partners are other plain
+    parameters (not themselves products, sheared or shifted), exponents finite numbers."""
+    special = set(model.product) | set(model.shear) | set(model.shift) | set(model.linear)
+    for pname, partners in model.product.items():
+        field = f"sampling.product.{pname}"
+        if pname not in model.parameter_names:
+            raise InputError(where, f"names unknown parameter {pname!r}", field=field)
+        if not isinstance(partners, MappingProxyType) or not partners:
+            raise InputError(where, f"expected {pname} = {{partner = exponent, ...}} (got {partners!r})", field=field)
+        for partner, power in partners.items():
+            if partner not in model.parameter_names or partner in special:
+                raise InputError(where, f"partner {partner!r} must be another parameter sampled in plain log "
+                                 f"(not a product, sheared, shifted or linear one)", field=field)
+            if isinstance(power, bool) or not isinstance(power, (int, float)) or not math.isfinite(power):
+                raise InputError(where, f"exponent of {partner!r} must be a finite number (got {power!r})",
+                                 field=field)
+
+
+def _derived_table(doc, where):
+    """``[derived]``: function = "skinfit.physics.<module>:<function>", over = [columns],
+    quantities = {name = unit}; quantities evaluated on the posterior draws of a fit."""
+    table = require(doc, "derived", dict, where, default={})
+    if not table:
+        return MappingProxyType({})
+    ref = require(table, "function", str, where, field_prefix="derived.")
+    resolve("derived", ref, where)
+    quantities = require(table, "quantities", dict, where, field_prefix="derived.")
+    over = require(table, "over", list, where, field_prefix="derived.", default=[])
+    return MappingProxyType({"function": ref, "over": tuple(over),
+                             "quantities": MappingProxyType(dict(quantities))})
+
+
+def _display(path):
+    from skinfit.io.paths import display
+
+    return display(path)
+
+
+def list_models() -> list[str]:
+    return sorted(available("models"))
+

@@ -1,0 +1,203 @@
+"""The code a card may name: role -> registered name -> function with the role's signature.
+
+A model card names functions in four roles: its ``forward`` model, ``[sampling.shear]``
+offsets, ``[sampling.shift]`` constants and a ``[derived]`` function.  Only functions
+registered for that role can be named, as ``module:function`` or by their short name, and
+the registry checks the role's call signature when a card is loaded: a card naming a cache
+helper, an integer constant or another role's function is refused then, not at fit time.
+
+Shipped physics is registered in :data:`BUILTIN` (as import strings: the physics modules
+import nothing from skinfit, and are imported only when a card names them).  Installed
+packages add functions through the ``skinfit.io.models`` entry-point group (read on first
+need): the entry point loads either a forward function (registered under the entry
+point's name) or a mapping ``{"forward": {name: f}, "shear": {...}, "shift": {...},
+"derived": {...}, "folder": path}`` whose ``folder`` holds ``models/`` and ``priors/``
+cards that :mod:`skinfit.io.toml` then finds by id.
+"""
+
+import inspect
+from dataclasses import dataclass
+from pathlib import Path
+
+from skinfit.errors import InputError
+
+__all__ = ["ROLES", "BUILTIN", "ENTRY_POINT_GROUP", "resolve", "registered", "register", "unregister",
+           "plugin_folders"]
+
+ENTRY_POINT_GROUP = "skinfit.io.models"
+
+#: role -> the positional arguments its functions are called with (see skinfit.physics).
+ROLES = {
+    "forward": ("p", "x", "c"),   # -> (y: dict of (k, n) arrays, ok: bool (k, n))
+    "shear": ("p", "c"),          # -> log-offset, broadcastable to (k,)
+    "shift": ("c",),              # -> float > 0, same unit as the parameter
+    "derived": ("p", "x", "c"),   # -> dict name -> (k, n) array
+}
+_CARD_KEY = {"forward": "forward", "shear": "sampling.shear", "shift": "sampling.shift",
+             "derived": "derived.function"}
+
+_PHYS = "skinfit.physics."
+#: role -> "module:function" of every shipped function a card may name.
+BUILTIN = {
+    "forward": tuple(_PHYS + r for r in (
+        "electroadhesion:electroadhesion", "electroadhesion:electroadhesion_coulomb",
+        "electroadhesion:electroadhesion_empirical",
+        "contact_area:contact_area", "contact_area:contact_area_hertz",
+        "contact_area:contact_area_no_levitation",
+        "textured:textured_surface", "textured:textured_no_transition", "textured:textured_no_hysteresis",
+        "ultrasonic:ultrasonic", "ultrasonic:ultrasonic_projected", "ultrasonic:ultrasonic_constant_mu",
+        "wavy:wavy_surface", "wavy:wavy_two_point_coulomb", "wavy:wavy_ball_bearing")),
+    "shear": (_PHYS + "electroadhesion:phi_offset", _PHYS + "ultrasonic:mu_inf_offset"),
+    "shift": (_PHYS + "electroadhesion:air_gap_shift",),
+    "derived": tuple(_PHYS + r for r in (
+        "contact_area:derived", "contact_area:derived_hertz", "contact_area:derived_no_levitation")),
+}
+
+
+@dataclass(frozen=True)
+class _Entry:
+    ref: str        # "module:function"
+    origin: str     # "skinfit" or "entry point <name> (<distribution>)"
+    function: object = None  # set for plug-ins (already loaded), None for builtins (imported on use)
+
+
+_TABLE = None      # role -> {key: _Entry}, keys being both "module:function" and the short name
+_PLUGINS = None    # (role -> {key: _Entry}, folders)
+_RESOLVED = {}
+
+
+def _builtin_table():
+    global _TABLE
+    if _TABLE is None:
+        table = {role: {} for role in ROLES}
+        for role, refs in BUILTIN.items():
+            for ref in refs:
+                entry = _Entry(ref, "skinfit")
+                table[role][ref] = entry
+                table[role].setdefault(ref.partition(":")[2], entry)
+        _TABLE = table
+    return _TABLE
+
+
+def _load_plugins():
+    """Read the ``skinfit.io.models`` entry points once: (role -> {key: entry}, card folders)."""
+    global _PLUGINS
+    if _PLUGINS is not None:
+        return _PLUGINS
+    from importlib.metadata import entry_points
+
+    table, folders = {role: {} for role in ROLES}, []
+    builtin = _builtin_table()
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        dist = getattr(ep.dist, "name", "?")
+        origin = f"entry point {ep.name!r} of {dist}"
+        try:
+            obj = ep.load()
+        except Exception as exc:  # a broken plug-in must not take the shipped models down with it
+            raise InputError(f"installed package {dist}", f"its {ENTRY_POINT_GROUP} entry point {ep.name!r} "
+                             f"({ep.value}) fails to import: {type(exc).__name__}") from None
+        spec = {"forward": {ep.name: obj}} if callable(obj) else obj
+        if not isinstance(spec, dict) or set(spec) - set(ROLES) - {"folder"}:
+            raise InputError(f"installed package {dist}", f"{origin} must load a forward function or a "
+                             f"mapping with keys {', '.join(ROLES)}, folder")
+        if spec.get("folder") is not None:
+            folders.append(Path(spec["folder"]))
+        for role in ROLES:
+            for name, func in dict(spec.get(role, {})).items():
+                ref = f"{getattr(func, '__module__', '?')}:{getattr(func, '__name__', '?')}"
+                entry = _Entry(ref, origin, func)
+                for key in (name, ref):
+                    if key in builtin[role] or key in table[role]:
+                        raise InputError(f"installed package {dist}", f"{origin} registers {role} "
+                                         f"{key!r}, which is already registered")
+                    table[role][key] = entry
+                _check_signature(role, func, f"installed package {dist}", f"{ENTRY_POINT_GROUP}.{ep.name}")
+    _PLUGINS = (table, tuple(folders))
+    return _PLUGINS
+
+
+def plugin_folders():
+    """Folders of ``models/`` and ``priors/`` cards provided by installed plug-ins."""
+    return _load_plugins()[1]
+
+
+def registered(role):
+    """Sorted short names registered for ``role`` (shipped, then plug-ins)."""
+    names = {k for k in _builtin_table()[role] if ":" not in k}
+    names |= {k for k in _load_plugins()[0][role] if ":" not in k}
+    return sorted(names)
+
+
+def _lookup(role, ref):
+    entry = _builtin_table()[role].get(ref)
+    if entry is None:
+        entry = _load_plugins()[0][role].get(ref)
+    return entry
+
+
+def _check_signature(role, func, where, field):
+    if not callable(func):
+        raise InputError(where, f"names {type(func).__name__} {func!r}, not a function", field=field)
+    try:
+        inspect.signature(func).bind(*ROLES[role])
+    except TypeError:
+        raise InputError(where, f"{getattr(func, '__name__', func)}{inspect.signature(func)} cannot be a "
+                         f"{role} function: it must take ({', '.join(ROLES[role])})", field=field) from None
+    except ValueError:  # builtins without a signature
+        raise InputError(where, f"{func!r} has no inspectable signature", field=field) from None
+
+
+def resolve(role, ref, where, field=None):
+    """The function ``ref`` (``module:function`` or a registered short name) names for ``role``.
+
+    Raises InputError naming ``where`` and the card key when ``ref`` is not registered for
+    this role (saying which role it is registered for, if any) or has the wrong signature.
+    """
+    field = field or _CARD_KEY[role]
+    if not isinstance(ref, str) or not ref:
+        raise InputError(where, f"expected the name of a registered {role} function (got {ref!r})", field=field)
+    key = (role, ref)
+    if key in _RESOLVED:
+        return _RESOLVED[key]
+    entry = _lookup(role, ref)
+    if entry is None:
+        other = [r for r in ROLES if r != role and _lookup(r, ref) is not None]
+        if other:
+            raise InputError(where, f"{ref!r} is registered as a {other[0]} function, not a {role} function "
+                             f"(registered {role} functions: {', '.join(registered(role))})", field=field)
+        raise InputError(where, f"{ref!r} is not a registered {role} function (registered: "
+                         f"{', '.join(registered(role))}; a package adds its own through the "
+                         f"{ENTRY_POINT_GROUP!r} entry point)", field=field)
+    func = entry.function
+    if func is None:
+        import importlib
+
+        module, _, name = entry.ref.partition(":")
+        func = getattr(importlib.import_module(module), name)
+    _check_signature(role, func, where, field)
+    _RESOLVED[key] = func
+    return func
+
+
+def register(role, name, func):
+    """Register ``func`` for ``role`` under ``name`` (a short name or ``module:function``) in
+    this process: for interactive work and tests; an installed package uses the entry point."""
+    if role not in ROLES:
+        raise InputError("register", f"unknown role {role!r} (expected one of {', '.join(ROLES)})")
+    _check_signature(role, func, "register", name)
+    if _lookup(role, name) is not None:
+        raise InputError("register", f"{role} {name!r} is already registered")
+    _load_plugins()[0][role][name] = _Entry(name, "register()", func)
+
+
+def unregister(role, name):
+    """Remove a function added by :func:`register`."""
+    _load_plugins()[0][role].pop(name, None)
+    _RESOLVED.pop((role, name), None)
+
+
+def _reset():
+    """Forget the entry points read so far (tests that install or fake a plug-in)."""
+    global _PLUGINS
+    _PLUGINS = None
+    _RESOLVED.clear()

@@ -1,0 +1,1 @@
+"""The static HTML report (Jinja2) written from saved results."""

@@ -1,0 +1,355 @@
+"""The report's sections on many fits of one model: subjects, their population, contrasts.
+
+:func:`subjects_section` tabulates each parameter per subject (labels as the user wrote them
+in the data, e.g. ``S01`` of ``subject=S01``); :func:`population_section` shows a population
+result (hyper-parameters, shrunk beside separate estimates) through :class:`PopulationView`,
+the one adapter that knows the population result's accessors; :func:`contrast_section`
+shows contrast tables (:mod:`skinfit.analysis.contrasts`) with each pair's probability of direction.
+Each section returns plain dicts of tables and figure jobs for :mod:`skinfit.report.html`.
+"""
+
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from skinfit.report.checks import NOT_CONVERGED_ATTR
+from skinfit.results.run_labels import run_labels
+
+__all__ = ["subject_label", "row_labels", "PopulationView", "subjects_section", "population_section", "contrast_section",
+           "population_parameters", "group_analyses", "hyperprior_table", "sampler_text"]
+
+
+def subject_label(fit):
+    """The group a fit was made on, as written in the data: ``S01`` for a dataset id
+    ``contact_area_synthetic[subject=S01]`` (``subject=S01, session=2`` -> ``S01, 2``); the
+    dataset id itself when the fit used a whole dataset."""
+    m = re.search(r"\[(.*)\]$", fit.dataset_id)
+    if not m:
+        return fit.dataset_id
+    parts = [p.split("=", 1)[-1] for p in m.group(1).split(",")]
+    return ", ".join(parts)
+
+
+def population_parameters(fit):
+    """Default parameters of a report's population: the scalar (not split) physical parameters,
+    noise scales left out, in the model card's order (those of ``skinfit population``'s
+    default but for the split parameters' levels)."""
+    names = [s["name"] for s in fit.attr("slots") if s["level"] is None]
+    return [n for n in names if not re.match(r"^(sigma|nu)(_|$)", n)]
+
+
+class PopulationView:
+    """What the report reads from a population result, in one place.
+
+    Works with :class:`skinfit.analysis.population.population.PopulationResult` (``parameters``, ``subjects``,
+    ``summary()``, ``subject_summary()``, ``hyperpriors``, ``sampler``); a result type with
+    other accessors needs only this class changed.
+    """
+
+    def __init__(self, result):
+        self.result = result
+        self._hyper = None
+
+    @property
+    def parameters(self):
+        return list(self.result.parameters)
+
+    @property
+    def subjects(self):
+        return list(self.result.subjects)
+
+    def hyper_table(self):
+        """Per parameter and quantity (population mean, sd, median; mu, tau in the sampling
+        coordinate; correlations): estimate (median) and 95% interval. Computed once per view
+        (with the R-hat and ESS of every hyper-parameter, ~50 ms): the report reads it per
+        parameter."""
+        if self._hyper is None:
+            self._hyper = self.result.summary()
+        return self._hyper.copy()
+
+    def subject_table(self):
+        """Per subject and parameter: separate-fit and shrunk median and 95% interval."""
+        return self.result.subject_summary()
+
+    def hyperpriors(self):
+        return {k: v for k, v in dict(getattr(self.result, "hyperpriors", {}) or {}).items() if not k.startswith("_")}
+
+    def effects(self):
+        """Conditions as effects (a slope with a condition against 0, split levels against the
+        first): probabilities and intervals; None when the result has no such questions."""
+        effects = getattr(self.result, "effects", None)
+        table = effects() if callable(effects) else None
+        return table if table is not None and len(table) else None
+
+    def warnings(self):
+        return list(getattr(self.result, "warnings", []) or [])
+
+    def sampler(self):
+        return dict(getattr(self.result, "sampler", {}) or {})
+
+    def origin(self):
+        """The file the result was read from; empty when it was computed for the report."""
+        return getattr(self.result, "origin", "") or ""
+
+    def correlation_prior(self):
+        """The prior of the correlations of a correlated population; None for an independent one."""
+        return (dict(getattr(self.result, "hyperpriors", {}) or {}).get("_correlation") or {}).get("prior")
+
+    def population_interval(self, parameter):
+        """The population distribution of ``parameter`` (natural units) at the posterior medians
+        of its hyper-parameters: median and central 94% range, ``mu -+ 1.881 tau`` in the
+        sampling coordinate (exponentiated for a log coordinate), i.e. where 94% of subjects
+        are expected to lie; None when the result has no such rows."""
+        t = self.hyper_table()
+        rows = t[t["parameter"] == parameter].set_index("quantity")
+        if not {"mu", "tau"} <= set(rows.index):
+            return None
+        mu, tau = float(rows.loc["mu", "estimate"]), float(rows.loc["tau", "estimate"])
+        back = np.exp if rows.loc["mu", "coordinate"] == "log" else (lambda v: v)
+        return {"median": float(back(mu)), "lo": float(back(mu - 1.881 * tau)), "hi": float(back(mu + 1.881 * tau))}
+
+
+def subjects_section(fits):
+    """Per parameter, a table of each subject's posterior (mean, sd, 94% HDI, R-hat, ESS).
+
+    ``fits``: {key: Fit} of one model. Returns {"labels": {key: label}, "tables": {parameter:
+    DataFrame indexed by subject label}}: a row per fit, fits of one subject told apart by
+    :func:`row_labels`.
+    """
+    labels = row_labels(fits)
+    summaries = {key: f.summary() for key, f in fits.items()}
+    first = next(iter(fits.values()))
+    tables = {}
+    for s in first.attr("slots"):
+        name = s["name"]
+        rows = {}
+        for key, table in summaries.items():
+            if name in table.index:
+                r = table.loc[name]
+                rows[labels[key]] = {"mean": r["mean"], "sd": r["sd"], "hdi_3%": r["hdi_3%"],
+                                     "hdi_97%": r["hdi_97%"], "r_hat": r["r_hat"], "ess_bulk": r["ess_bulk"]}
+        if rows:
+            frame = pd.DataFrame.from_dict(rows, orient="index")
+            frame.index.name = "subject"
+            tables[name] = frame
+    return {"labels": labels, "tables": tables}
+
+
+def row_labels(fits):
+    """{key: label} of ``fits`` ({key: Fit}): each fit's :func:`subject_label`; fits of one
+    label (a subject fitted twice: other seeds, priors, a split) with the options, file or
+    content that tell them apart (:func:`skinfit.results.run_labels.run_labels`), e.g. ``S01 [seed 2]``;
+    the same fit given twice numbered ``#2``. One row per fit, never one for two."""
+    labels = {key: subject_label(f) for key, f in fits.items()}
+    alike = {}
+    for key, label in labels.items():
+        alike.setdefault(label, []).append(key)
+    for keys in (k for k in alike.values() if len(k) > 1):
+        runs = run_labels([fits[k] for k in keys])
+        for key, run in zip(keys, runs):
+            labels[key] = f"{labels[key]} {run[len(fits[key].model_id):].strip()}".strip()
+    return labels
+
+
+def population_section(result):
+    """Tables of a population result: hyper-parameters, and shrunk beside separate estimates.
+
+    Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
+    "hyperprior_table": DataFrame, "sampler", "sampler_text", "effects": DataFrame or None,
+    "warnings": [text], "origin": the file read or "", "correlation": the correlation prior or
+    None, "intervals": {parameter: the population distribution's median and 94% range}}.
+    """
+    view = result if isinstance(result, PopulationView) else PopulationView(result)
+    hyper = view.hyper_table().set_index(["parameter", "quantity"])
+    per = view.subject_table()
+    subjects = {}
+    for name in view.parameters:
+        t = per[per["parameter"] == name].drop(columns="parameter").set_index("subject")
+        subjects[name] = t
+    return {"parameters": view.parameters, "hyper": hyper, "subjects": subjects,
+            "hyperpriors": view.hyperpriors(), "hyperprior_table": hyperprior_table(view.hyperpriors()),
+            "sampler": view.sampler(), "sampler_text": sampler_text(view.sampler()), "effects": view.effects(),
+            "warnings": view.warnings(), "origin": view.origin(), "correlation": view.correlation_prior(),
+            "intervals": {p: view.population_interval(p) for p in view.parameters}}
+
+
+def hyperprior_table(hyperpriors):
+    """The hyper-priors as a table, a row per parameter: family, coordinate, the priors of the
+    population location ``mu`` and scale ``tau`` (``sd``), and the prior file's prior they were
+    derived from; other entries (``nu`` of a Student-t family) as further columns."""
+    named = {"family": "family", "coordinate": "coordinate", "mu": "prior of mu", "sd": "prior of tau",
+             "from": "derived from"}
+    entries = {name: h for name, h in hyperpriors.items() if isinstance(h, dict)}
+    extra = list(dict.fromkeys(k for h in entries.values() for k in h if k not in named))  # nu: Student-t only
+    return pd.DataFrame([{**{shown: h.get(key, "") for key, shown in named.items()},
+                          **{k: h.get(k, "") for k in extra}} for h in entries.values()],
+                        index=pd.Index(list(entries), name="parameter"))
+
+
+def _range(values):
+    values = [float(v) for v in values]
+    lo, hi = min(values), max(values)
+    return f"{lo:.2f}" if round(lo, 2) == round(hi, 2) else f"{lo:.2f}-{hi:.2f}"
+
+
+def sampler_text(sampler):
+    """One sentence on how a population was sampled, from its sampler record: method, chains,
+    sweeps, burn-in and thinning (Gibbs) or steps (reweighting), convergence with the worst
+    R-hat and ESS, and per-subject rates as their range; the record's convergence history
+    (``checks``) is left to the saved result."""
+    if not sampler:
+        return ""
+    parts = [str(sampler.get("method", "sampler not recorded"))]
+    if "chains" in sampler:
+        parts.append(f"{sampler['chains']} chains")
+    if "sweeps" in sampler:
+        parts.append(f"{sampler['sweeps']} sweeps (burn-in {sampler.get('burn', '?')}, thinned by "
+                     f"{sampler.get('thin', '?')})")
+    if "n_steps" in sampler:
+        parts.append(f"{sampler['n_steps']} steps")
+    if "draws_per_subject" in sampler:
+        parts.append(f"{sampler['draws_per_subject']} draws a subject")
+    text = ", ".join(parts)
+    if "converged" in sampler:
+        text += "; " + ("converged" if sampler["converged"] else "NOT converged")
+    worst = [f"max R-hat {float(sampler['rhat_max']):.4f}" if "rhat_max" in sampler else "",
+             f"min ESS {float(sampler['ess_min']):.0f}" if "ess_min" in sampler else ""]
+    if any(worst):
+        text += f" ({', '.join(w for w in worst if w)})"
+    rates = []
+    if isinstance(sampler.get("acceptance"), dict) and sampler["acceptance"]:
+        rates.append(f"acceptance per subject {_range(sampler['acceptance'].values())}")
+    if isinstance(sampler.get("scale_acceptance"), (int, float)):  # None: no scale moves (correlated)
+        rates.append(f"of the scale moves {float(sampler['scale_acceptance']):.2f}")
+    if isinstance(sampler.get("importance_ess"), dict) and sampler["importance_ess"]:
+        rates.append(f"importance ESS per subject {_range(sampler['importance_ess'].values())}")
+    if rates:
+        text += "; " + ", ".join(rates)
+    if "seed" in sampler:
+        text += f"; seed {sampler['seed']}"
+    return text + "."
+
+
+def _other_fits(result, digests, base):
+    """Why the saved population ``result`` is not the one shown for the fits of ``digests``."""
+    theirs = set(result.inputs.values())
+    why = (f"{len(theirs)} subjects' fits, {len(theirs & set(digests))} of them among the {len(digests)} here"
+           if theirs else "it does not record its fits: written by an older skinfit")
+    return (f"the population saved in {result.origin or 'a result given'} is not shown: it was made from other "
+            f"{result.model_id} fits than those on {base} reported here ({why}); the one shown was computed for "
+            f"this report with the defaults (run `skinfit population` again to show yours)")
+
+
+def contrast_section(table, top=None):
+    """A contrast table (:func:`skinfit.analysis.contrasts.fit_contrasts` / ``level_contrasts``) with the
+    probability of direction ``pd = max(P(A > B), P(A < B))``, sorted by it; the first ``top``
+    rows when given."""
+    t = table.copy()
+    if "parameter" in t.columns:  # first, after the pair
+        t.insert(2, "parameter", t.pop("parameter"))
+    t.insert(2, "prob_direction", np.maximum(t["p_greater"], 1 - t["p_greater"]))
+    t.insert(3, "direction", np.where(t["p_greater"] >= 0.5, "A > B", "A < B"))
+    t = t.sort_values("prob_direction", ascending=False, kind="stable").reset_index(drop=True)
+    return t.head(top) if top else t
+
+
+def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved=()):
+    """Population results and contrasts for the fits of a ``--by`` run or a campaign.
+
+    ``fits``: {key: Fit}. For each model with at least ``min_fits`` fits on groups of datasets
+    (dataset ids ``NAME[col=value]``; subjects of several datasets pooled, labelled
+    ``NAME/subject`` as ``skinfit population`` labels a campaign's): a population and the
+    pairwise contrasts between subjects of its parameters (none when a subject is fitted twice,
+    which is said through ``echo``); for every fit with a parameter split by a condition, the
+    contrasts between its levels. A failing step is reported through ``echo`` and left out,
+    never a partial table. Each contrast table's ``attrs["not_converged"]`` names the fits it
+    is drawn from that did not converge (:mod:`skinfit.report.checks`).
+
+    The population is the one of ``saved`` (results of ``skinfit population``, e.g. read by
+    :func:`skinfit.analysis.population.population.load_population`) made from exactly these fits, matched by
+    content (:func:`skinfit.analysis.population.population.subject_digest` of every subject; labels may differ);
+    else it is computed here over :func:`population_parameters` with the default families,
+    seeded, and a saved result of the model made from other fits is named in its warnings
+    (and through ``echo``), not shown.
+
+    ``cache_dir``: where each computed population is kept by the content of its inputs
+    (:func:`skinfit.analysis.population.population.population`'s ``cache``), so a report of the same fits does
+    not sample it again.
+
+    Returns ``(populations {model id: result}, contrasts {title: DataFrame})``.
+    """
+    import warnings
+
+    from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
+    from skinfit.errors import InputError
+    from skinfit.report.html import file_part
+
+    by_model = {}
+    for key, f in fits.items():
+        base = re.sub(r"\[.*\]$", "", f.dataset_id)
+        if base != f.dataset_id:
+            by_model.setdefault(f.model_id, []).append((base, key, f))
+    populations, contrasts = {}, {}
+    for model_id, members in by_model.items():
+        bases = sorted({b for b, _, _ in members})
+        base = ", ".join(bases)  # subjects of several datasets: one population, labelled dataset/subject
+        group, keys, twice = {}, {}, []
+        for b, key, f in members:
+            label = subject_label(f) if len(bases) == 1 else f"{b}/{subject_label(f)}"
+            if label in group:
+                twice.append(f"{label} (report keys {keys[label]} and {key})")
+            group[label], keys[label] = f, key
+        if twice:  # the same subject counted twice would be two subjects to the population
+            if echo:
+                echo(f"skinfit report: no population or contrasts between subjects for {model_id}: fitted more "
+                     f"than once: {'; '.join(twice)}")
+            continue
+        if len(group) < min_fits:
+            continue
+        from skinfit.analysis.population.population import subject_digest
+
+        digests = sorted(subject_digest(f) for f in group.values())
+        mine = [r for r in saved if r.model_id == model_id]
+        match = next((r for r in mine if sorted(r.inputs.values()) == digests), None)
+        names = population_parameters(next(iter(group.values())))
+        if match is not None:
+            populations[model_id] = match
+        else:
+            try:
+                from skinfit.analysis.population.population import population
+
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    stem = file_part(f"{model_id}__{'__'.join(bases)}")
+                    cache = None if cache_dir is None else Path(cache_dir) / f"population_{stem}.npz"
+                    result = population(group, names, rng=seed, cache=cache)
+                notes = [_other_fits(r, digests, base) for r in mine]
+                for note in notes:
+                    if echo:
+                        echo(f"skinfit report: {note}")
+                populations[model_id] = replace(result, warnings=[*result.warnings, *notes]) if notes else result
+            except (InputError, ValueError, RuntimeError) as exc:
+                if echo:
+                    echo(f"skinfit report: no population for {model_id} on {base}: {exc}")
+        rows = []
+        for name in names:
+            try:
+                rows.append(fit_contrasts(group, name, rng=seed).assign(parameter=name))
+            except (InputError, ValueError) as exc:
+                if echo:
+                    echo(f"skinfit report: no contrasts of {name} for {model_id}: {exc}")
+        if rows:
+            table = pd.concat(rows, ignore_index=True)
+            table.attrs[NOT_CONVERGED_ATTR] = [label for label, f in group.items() if not f.converged]
+            contrasts[f"{model_id} on {base}: between subjects"] = table
+    for (key, f), label in zip(fits.items(), run_labels(fits.values())):  # two split fits: each its own table
+        split = {s["base"] for s in f.attr("slots") if s["level"] is not None}
+        rows = [level_contrasts(f, name).assign(parameter=name) for name in sorted(split)]
+        if rows:
+            table = pd.concat(rows, ignore_index=True)
+            table.attrs[NOT_CONVERGED_ATTR] = [] if f.converged else [f"{label} on {f.dataset_id}"]
+            contrasts[f"{label} on {f.dataset_id}: between conditions"] = table
+    return populations, contrasts
