@@ -128,7 +128,7 @@ def _n_slots(fit):
     return len(fit.attr("slots"))
 
 
-# skinfit's sizes, as skinfit.plots computes them (the arviz variants are drawn at the same size)
+# skinfit's sizes, as skinfit.plots.figures computes them (the arviz variants are drawn at the same size)
 def _size_trace(fit):
     return 9.4, 1.35 * _n_slots(fit) + 0.9
 

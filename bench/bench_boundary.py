@@ -18,7 +18,7 @@ CASES = {
     "load_model x 15 (skinfit models' work)": "import skinfit\nfor m in skinfit.list_models(): skinfit.load_model(m)",
     "load_dataset x 5 (pint on first use)": "import skinfit\nfor d in skinfit.list_datasets(): skinfit.load_dataset(d)",
     "import pint + UnitRegistry()": "import pint\npint.UnitRegistry()",
-    "entry_points(group='skinfit.io.models')": "from skinfit import registry\nregistry.plugin_folders()",
+    "entry_points(group='skinfit.models')": "from skinfit.io import registry\nregistry.plugin_folders()",
 }
 
 

@@ -1,4 +1,4 @@
-"""Cost of the forward-contract check (skinfit.forward_check) each Posterior makes at construction:
+"""Cost of the forward-contract check (skinfit.io.forward_check) each Posterior makes at construction:
 per shipped model on its shipped dataset, the check (best of N) against one log-density call on
 32 prior draws (best of N), both in this process.  Writes bench/results/forward_check.md.
 

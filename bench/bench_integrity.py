@@ -1,4 +1,4 @@
-"""Saved results against damage, and what their checksums cost (skinfit.integrity).
+"""Saved results against damage, and what their checksums cost (skinfit.io.integrity).
 
 Two studies, written to bench/results/integrity.md:
 

@@ -165,7 +165,7 @@ def run_skinfit(model, dataset, priors, seed):
             f"MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, sampling {t['sampling_s']:.2f} s, "
             f"result tree {t['tree_s']:.2f} s, pointwise + predictive on first use {t['pointwise_s']:.2f} s "
             f"({mem_pointwise.mb:.0f} MB)")
-    return Result("skinfit.results.fit", wall, ess, rhat, evals, mem.mb, note,
+    return Result("skinfit.fit", wall, ess, rhat, evals, mem.mb, note,
                   extra={"fit": fit, "timings": t, "sampler": s, "pointwise_s": t["pointwise_s"],
                          "pointwise_mb": mem_pointwise.mb})
 

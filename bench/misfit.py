@@ -1,5 +1,5 @@
-"""Calibration and power of a fit's warnings: the misfit check (skinfit.misfit) and every guard
-rail ``skinfit fit --strict`` acts on (skinfit.guardrails), issue 21 class 8 and issue 39.
+"""Calibration and power of a fit's warnings: the misfit check (skinfit.analysis.misfit) and every guard
+rail ``skinfit fit --strict`` acts on (skinfit.inference.guardrails), issue 21 class 8 and issue 39.
 
     python bench/misfit.py                                  # 34 fits per model card (102 per family)
     python bench/misfit.py --per-model 34 --power 10 --jobs 2

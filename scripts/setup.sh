@@ -10,7 +10,7 @@ if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c 'import sys; sys.exit(sys.
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e ".[${1:-test}]"
-# the example plug-in package (a model added through the skinfit.models entry point), which
+# the example plug-in package (a model added through the skinfit.io.models entry point), which
 # tests/test_plugin.py fits end to end
 if [ "${1:-test}" = test ]; then
   .venv/bin/python -m pip install --quiet -e examples/skinfit-example-plugin

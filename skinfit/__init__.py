@@ -5,64 +5,54 @@
 >>> [p.name for p in model.parameters][:2]
 ['E_star', 'tau0']
 
-The public names are imported on first use (PEP 562), so ``import skinfit`` and commands
-such as ``skinfit models`` do not pay for ArviZ, xarray, scipy.stats or emcee (several
-seconds on a loaded 2-core machine; bench/results/startup.md).
+The public names below are imported on first use (PEP 562 ``__getattr__``), so that
+``import skinfit`` and ``skinfit models`` do not import ArviZ, xarray, scipy.stats or emcee.
+Everything else is internal; the layers are described in ``docs/design/layers.md``.
 """
 
 import importlib
-import importlib.util
-import sys
-import types
 
-#: Public name -> the submodule that defines it.
-_LAZY = {
-    "ConvergenceWarning": "errors", "InputError": "errors", "SupportWarning": "errors",
-    "Dataset": "data", "list_datasets": "data", "load_dataset": "data",
-    "Model": "models", "list_models": "models", "load_model": "models",
-    "PriorSet": "priors", "list_priors": "priors", "load_priors": "priors",
-    "Fit": "fit", "fit": "fit", "load_fit": "fit",
-    "evidence": "evidence", "compare": "compare", "design": "design",
+#: Public name -> the module that defines it (docs/api.md documents each; tests/test_public_api.py freezes them).
+_PUBLIC = {
+    # the files a researcher edits
+    "Model": "skinfit.io.models", "load_model": "skinfit.io.models", "list_models": "skinfit.io.models",
+    "PriorSet": "skinfit.io.priors", "load_priors": "skinfit.io.priors", "list_priors": "skinfit.io.priors",
+    "Dataset": "skinfit.io.data", "load_dataset": "skinfit.io.data", "list_datasets": "skinfit.io.data",
+    # fitting and its result
+    "fit": "skinfit.results.fit", "Fit": "skinfit.results.fit", "load_fit": "skinfit.results.fit",
+    # analyses of fits
+    "evidence": "skinfit.analysis.evidence", "compare": "skinfit.analysis.compare",
+    "fit_by": "skinfit.analysis.groups", "load_groups": "skinfit.analysis.groups",
+    "level_contrasts": "skinfit.analysis.contrasts", "fit_contrasts": "skinfit.analysis.contrasts",
+    "population": "skinfit.analysis.population.population",
+    "load_population": "skinfit.analysis.population.population",
+    "PopulationResult": "skinfit.analysis.population.population",
+    "design": "skinfit.analysis.design", "run_sbc": "skinfit.analysis.sbc",
+    # errors and warnings
+    "InputError": "skinfit.errors", "InputTypeError": "skinfit.errors", "ForwardError": "skinfit.errors",
+    "MissingDependency": "skinfit.errors", "WorkerError": "skinfit.errors",
+    "ConvergenceWarning": "skinfit.errors", "SupportWarning": "skinfit.errors", "IntegrityWarning": "skinfit.errors",
+    "MisfitWarning": "skinfit.analysis.misfit", "PopulationWarning": "skinfit.analysis.population.population",
+    "ShadowWarning": "skinfit.io.provenance",
 }
 
-__all__ = sorted(_LAZY)
-_SHADOWED = ("fit", "compare", "evidence", "design")  # functions named like their submodules
+__all__ = sorted(_PUBLIC)
 
 
-class _Package(types.ModuleType):
-    """The package module: public names resolved on first use.
+def __getattr__(name):
+    if name == "__version__":  # importlib.metadata costs ~0.1 s: only when asked
+        from importlib.metadata import PackageNotFoundError, version
 
-    ``skinfit.fit``, ``skinfit.compare`` and ``skinfit.evidence`` are functions named like
-    their submodules; importing a submodule sets the package attribute of that name, which
-    here would hide the function, so that assignment is skipped (``sys.modules`` still holds
-    the submodule, and ``from skinfit.results.fit import ...`` works as before).
-    """
-
-    def __getattr__(self, name):
-        if name == "__version__":  # importlib.metadata costs ~0.1 s: only when asked
-            from importlib.metadata import PackageNotFoundError, version
-
-            try:
-                value = version("skinfit")
-            except PackageNotFoundError:  # running from a source tree without installation
-                value = "0.0.0+unknown"
-            super().__setattr__(name, value)
-            return value
-        if name not in _LAZY:  # a submodule (skinfit._toml, skinfit.plots...), as eager imports gave
-            if name.startswith("__") or importlib.util.find_spec(f"{__name__}.{name}") is None:
-                raise AttributeError(f"module 'skinfit' has no attribute {name!r}")
-            return importlib.import_module(f".{name}", __name__)
-        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
-        super().__setattr__(name, value)
-        return value
-
-    def __setattr__(self, name, value):
-        if name in _SHADOWED and isinstance(value, types.ModuleType):
-            return
-        super().__setattr__(name, value)
-
-    def __dir__(self):
-        return sorted(set(super().__dir__()) | set(_LAZY))
+        try:
+            return version("skinfit")
+        except PackageNotFoundError:  # a source tree that was not installed
+            return "0.0.0+unknown"
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'skinfit' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_PUBLIC[name]), name)
+    globals()[name] = value
+    return value
 
 
-sys.modules[__name__].__class__ = _Package
+def __dir__():
+    return sorted(set(globals()) | set(_PUBLIC))

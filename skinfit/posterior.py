@@ -238,7 +238,7 @@ class Posterior:
 
     def _check_forward(self):
         """The forward function on a few prior quantiles (no random draw) at the data's distinct
-        rows, checked against its contract (skinfit.forward_check) before any work starts."""
+        rows, checked against its contract (skinfit.io.forward_check) before any work starts."""
         theta = self.prior_transform(check_quantiles(self.ndim))
         params = {p: _take(theta, j) for p, j in self._param_index_u.items()}
         with np.errstate(all="ignore"):  # what the function computes is checked, not how

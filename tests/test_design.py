@@ -539,7 +539,7 @@ def test_design_too_big_refused_with_its_size_before_work_starts(tmp_path, capsy
 
 
 def test_design_accepts_the_units_data_files_accept():
-    """Issue 39.14: kN, uN, µN (any unit skinfit.units reads) for the candidates, as for data."""
+    """Issue 39.14: kN, uN, µN (any unit skinfit.io.units reads) for the candidates, as for data."""
     model = skinfit.load_model("electroadhesion")
     want, _ = read_candidates({"grid": {"normal_force": {"unit": "mN", "values": [200, 2000]},
                                         "voltage": {"unit": "V", "values": [0, 200]}}}, model)

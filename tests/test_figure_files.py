@@ -74,7 +74,7 @@ def test_the_same_figure_gives_the_same_files(tmp_path):
     import subprocess
     import sys
 
-    draw = ("import sys\nfrom matplotlib.figure import Figure\nfrom skinfit import report\n"
+    draw = ("import sys\nfrom matplotlib.figure import Figure\nfrom skinfit.report import html as report\n"
             "fig = Figure(figsize=(4, 2), layout='constrained')\nax = fig.subplots()\n"
             "ax.plot([0, 1], [0, 1]); ax.set(xlabel='normal force [N]', title='a title')\n"
             "report._write_png(fig, sys.argv[1])\n")

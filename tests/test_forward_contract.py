@@ -1,4 +1,4 @@
-"""A model's forward function keeps its contract (skinfit.forward_check) or the fit stops in one line.
+"""A model's forward function keeps its contract (skinfit.io.forward_check) or the fit stops in one line.
 
 Issue 39, point 14: a plug-in forward that returned NaN, inf, the wrong shape or type, a dict
 without an observable, raised, or mixed up the parameter draws of a batch ended in a traceback
@@ -253,7 +253,7 @@ def test_class_forward_contract_cli_one_line_error(data_csv, tmp_path):
     script = tmp_path / "run.py"
     script.write_text(
         "import sys, numpy as np\n"
-        "from skinfit import registry\n"
+        "from skinfit.io import registry\n"
         "from skinfit.apps.cli import main\n"
         "def wrong(p, x, c):\n"
         "    return {'tangential_force': np.zeros((len(p['mu']), 3))}, True\n"

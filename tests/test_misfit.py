@@ -1,4 +1,4 @@
-"""Issue 21, class 8: a fit checks its own fit to the data (skinfit.misfit) and says so in its
+"""Issue 21, class 8: a fit checks its own fit to the data (skinfit.analysis.misfit) and says so in its
 report text, its saved file and the HTML report; two runs of one model on one dataset are told
 apart by their options in compare and report.  Issue 39 point 3: the check looks at every
 column of the dataset and at the order of the rows, not only at the model's covariates."""

@@ -62,9 +62,9 @@ def test_missing_shipped_cards_say_where_they_were_looked_for(tmp_path, monkeypa
     import skinfit.io.paths
     import skinfit.io.registry
 
-    monkeypatch.setattr(skinfit.paths, "shipped_root", lambda: None)
-    monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
-    monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
+    monkeypatch.setattr(skinfit.io.paths, "shipped_root", lambda: None)
+    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", lambda: [])
+    monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: tmp_path / "user")
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
     for load, kind in ((skinfit.load_model, "models"), (skinfit.load_priors, "priors"),
                        (skinfit.load_dataset, "datasets")):

@@ -1,4 +1,4 @@
-"""A saved fit's groups read with h5py directly (skinfit._netcdf) are exactly what h5netcdf and
+"""A saved fit's groups read with h5py directly (skinfit.results._netcdf) are exactly what h5netcdf and
 xarray read; a file of any other layout is read by h5netcdf, as before."""
 
 import warnings
@@ -84,7 +84,7 @@ def _edited(src, dst, edit):
 
 def _restamped(path):
     """The edited file as another writer of this content would leave it: its checksums
-    (skinfit.integrity) those of what xarray reads from it, so that skinfit reads it rather
+    (skinfit.io.integrity) those of what xarray reads from it, so that skinfit reads it rather
     than refusing it as damaged; unchanged when xarray cannot read it."""
     try:
         with warnings.catch_warnings():

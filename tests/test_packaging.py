@@ -30,8 +30,8 @@ def isolated(tmp_path, monkeypatch):
     """A search path with no $SKINFIT_PATH, no --path, no plug-in folders and an empty user
     folder under tmp_path."""
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
-    monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
-    monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
+    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", lambda: [])
+    monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: tmp_path / "user")
     skinfit.io.paths.set_search_path([])
     yield tmp_path
     skinfit.io.paths.set_search_path([])
@@ -94,7 +94,7 @@ def test_a_card_only_in_a_user_folder_is_listed_with_its_origin(isolated, capsys
 
 @pytest.mark.parametrize("command", ["models", "datasets", "priors"])
 def test_listing_nothing_says_so_and_exits_1(isolated, monkeypatch, capsys, command):
-    monkeypatch.setattr(skinfit.paths, "shipped_root", lambda: None)
+    monkeypatch.setattr(skinfit.io.paths, "shipped_root", lambda: None)
     assert main([command]) == 1
     captured = capsys.readouterr()
     assert captured.out == ""

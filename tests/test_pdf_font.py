@@ -1,4 +1,4 @@
-"""The saved figures' font cut (skinfit._pdf_font): the same text as DejaVu Sans, in the same
+"""The saved figures' font cut (skinfit.plots._pdf_font): the same text as DejaVu Sans, in the same
 places, quicker to embed; the original font wherever that could not be promised."""
 
 import io
@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from fontTools.ttLib import TTFont  # noqa: E402
 from matplotlib.ft2font import FT2Font, LoadFlags  # noqa: E402
 
-from skinfit import plots  # noqa: E402
+from skinfit.plots import figures as plots  # noqa: E402
 
 from skinfit.plots import _pdf_font
 

@@ -273,7 +273,7 @@ def standin(tmp_path_factory):
     module.__all__ = ["contact_pair", "wavy_offset"]
     module.contact_pair, module.wavy_offset = _contact_pair, _wavy_offset
     sys.modules[module.__name__] = module
-    for name in module.__all__:  # the code a card may name is what is registered (skinfit.registry)
+    for name in module.__all__:  # the code a card may name is what is registered (skinfit.io.registry)
         registry.register("forward", f"{module.__name__}:{name}", getattr(module, name))
     d = tmp_path_factory.mktemp("standin")
     rng = np.random.default_rng(SEED)

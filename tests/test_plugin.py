@@ -1,5 +1,5 @@
 """A model added without editing skinfit (issue 22, point 3): the example plug-in package under
-examples/skinfit-example-plugin registers its physics function through the ``skinfit.io.models``
+examples/skinfit-example-plugin registers its physics function through the ``skinfit.models``
 entry point and brings its model card and prior file; skinfit lists it and fits it end to end,
 recovering the parameters that generated the data.
 

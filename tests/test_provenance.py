@@ -33,8 +33,8 @@ def _sha(path):
 def user(tmp_path, monkeypatch):
     """An empty user folder under tmp_path, no $SKINFIT_PATH, --path or plug-in folders."""
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
-    monkeypatch.setattr(skinfit.registry, "plugin_folders", lambda: [])
-    monkeypatch.setattr(skinfit.paths, "user_root", lambda: tmp_path / "user")
+    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", lambda: [])
+    monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: tmp_path / "user")
     skinfit.io.paths.set_search_path([])
     yield tmp_path / "user"
     skinfit.io.paths.set_search_path([])
@@ -81,7 +81,7 @@ def test_class_input_provenance_a_user_folder_prior_that_hides_the_shipped_one_i
     assert inputs["dataset"]["path"] == str(ROOT / "datasets" / DATA / "dataset.toml")
     assert "WARNING: the prior file used is" in fit.report_text()
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
-    monkeypatch.setattr(skinfit.paths, "user_root", lambda: edited.parents[1])  # that user folder, in this process
+    monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: edited.parents[1])  # that user folder, in this process
     with pytest.warns(ShadowWarning, match="prior file used is .* other content"):
         skinfit.fit(MODEL, DATA, rng=1, ess_target=20, max_steps=100)
     assert json.loads(fit.attrs["inputs"])["priors"]["path"] == str(edited)  # in the saved file's attributes

@@ -333,7 +333,7 @@ def test_cli_report_from_run_directories(rival, tmp_path, capsys):
     assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "rep")]) == 0
     assert "report written" in capsys.readouterr().out
     page = _parse(tmp_path / "rep" / "index.html")
-    # one fit saved twice: two sections, told apart by their files (skinfit.run_labels)
+    # one fit saved twice: two sections, told apart by their files (skinfit.results.run_labels)
     summaries = sorted(key for kind, key in page.tables if kind == "summary")
     assert len(summaries) == 2 and "file_S01_fit.nc" in summaries[0] and "file_S02_fit.nc" in summaries[1]
     # two fits of one model: forest plots across them

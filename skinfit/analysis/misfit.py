@@ -404,7 +404,7 @@ def simulated_check(model, seed, *, dataset=None, contaminate=None, fit_model=No
                       + ("; pareto_k" if record["pareto_k"] and record["pareto_k"]["warn"] else ""),
             "min_p": min(c["p"] for c in record["checks"]), "m": record["m"], "draws": record["draws"],
             "pareto_k_gt_0.7": record["pareto_k"]["count"] if record["pareto_k"] else -1,
-            # every warning --strict acts on, and the notes it does not (skinfit.guardrails)
+            # every warning --strict acts on, and the notes it does not (skinfit.inference.guardrails)
             "strict": bool(result.warnings),
             "guard_rails": "; ".join(_label(w) for w in result.warnings if w["check"] != "misfit"),
             "notes": "; ".join(_label(w) for w in result.notes),

@@ -235,7 +235,7 @@ def _cmd_fit(args):
         if card is not None:
             print(f"dataset card (rerun with it: skinfit fit {args.model} {out / 'dataset'}): {card}")
         print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
-    if args.strict and result.warnings:  # failed or warned (skinfit.guardrails): result kept, exit 3
+    if args.strict and result.warnings:  # failed or warned (skinfit.inference.guardrails): result kept, exit 3
         print(f"skinfit: --strict: {len(result.warnings)} guard-rail problem(s), see above", file=sys.stderr)
         return 3
     return 0
@@ -497,7 +497,7 @@ def _run(args):
     except MissingDependency as exc:
         print(f"skinfit: error: {one_line(exc)}", file=sys.stderr)
         return 2
-    except RuntimeError as exc:  # MAPError: no start possible, its message names the rows (skinfit.optimize)
+    except RuntimeError as exc:  # MAPError: no start possible, its message names the rows (skinfit.inference.optimize)
         optimize = sys.modules.get("skinfit.inference.optimize")  # not imported at start-up: raised only once it is
         if optimize is None or not isinstance(exc, optimize.MAPError):
             raise

@@ -3,7 +3,7 @@
 A search path of folders, first match wins: folders given explicitly (``skinfit --path DIR``,
 :func:`set_search_path`) > the folders in ``$SKINFIT_PATH`` (``os.pathsep``-separated) > the
 user folder (``platformdirs.user_data_dir("skinfit")``) > the card folders of installed plug-ins
-(``skinfit.io.models`` entry points, :mod:`skinfit.io.registry`) > the files shipped with skinfit. Each
+(``skinfit.models`` entry points, :mod:`skinfit.io.registry`) > the files shipped with skinfit. Each
 folder holds the repository's layout: ``models/<id>.toml``, ``priors/<id>.toml``,
 ``datasets/<id>/dataset.toml``; a missing sub-folder is skipped.
 

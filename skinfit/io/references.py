@@ -1,5 +1,5 @@
 """The works the model cards and prior files cite (``skinfit/references.toml``, plus a
-``references.toml`` in any folder of the search path, for a user's own cards: skinfit.paths).
+``references.toml`` in any folder of the search path, for a user's own cards: skinfit.io.paths).
 
 A card's ``source`` is one or more citations joined by ``"; "``, each ``KEY`` or
 ``KEY, where`` (``"fujii_wavy, eq. 13"``); :func:`check_source` refuses an unknown key at load

@@ -8,7 +8,7 @@ helper, an integer constant or another role's function is refused then, not at f
 
 Shipped physics is registered in :data:`BUILTIN` (as import strings: the physics modules
 import nothing from skinfit, and are imported only when a card names them).  Installed
-packages add functions through the ``skinfit.io.models`` entry-point group (read on first
+packages add functions through the ``skinfit.models`` entry-point group (read on first
 need): the entry point loads either a forward function (registered under the entry
 point's name) or a mapping ``{"forward": {name: f}, "shear": {...}, "shift": {...},
 "derived": {...}, "folder": path}`` whose ``folder`` holds ``models/`` and ``priors/``
@@ -24,7 +24,7 @@ from skinfit.errors import InputError
 __all__ = ["ROLES", "BUILTIN", "ENTRY_POINT_GROUP", "resolve", "registered", "register", "unregister",
            "plugin_folders"]
 
-ENTRY_POINT_GROUP = "skinfit.io.models"
+ENTRY_POINT_GROUP = "skinfit.models"
 
 #: role -> the positional arguments its functions are called with (see skinfit.physics).
 ROLES = {
@@ -80,7 +80,7 @@ def _builtin_table():
 
 
 def _load_plugins():
-    """Read the ``skinfit.io.models`` entry points once: (role -> {key: entry}, card folders)."""
+    """Read the ``skinfit.models`` entry points once: (role -> {key: entry}, card folders)."""
     global _PLUGINS
     if _PLUGINS is not None:
         return _PLUGINS

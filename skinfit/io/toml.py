@@ -140,7 +140,7 @@ def _kind_name(kind):
 
 
 def find_file(kind, name, suffix=".toml"):
-    """Resolve ``name`` as a path, or as an id on the search path (skinfit.paths)."""
+    """Resolve ``name`` as a path, or as an id on the search path (skinfit.io.paths)."""
     return locate(kind, name)
 
 

@@ -55,7 +55,7 @@ MIN_ACCEPTANCE_MEAN = 0.1
 MAX_OUTSIDE_SUPPORT = 0.05  # share of log-density evaluations
 MAX_RHAT = 1.05  # over walkers: a secondary check
 
-_FIGURES = (  # (file name, skinfit.plots function, caption)
+_FIGURES = (  # (file name, skinfit.plots.figures function, caption)
     ("ppc", "plot_ppc", "Posterior predictive: the data over the 50% and 90% posterior-predictive "
                         "bands and the posterior median curve, in the units the data came in"),
     ("prior_posterior", "plot_prior_posterior", "Prior (line) against posterior (filled) per parameter: "
@@ -219,7 +219,7 @@ def fit_diagnostics(fit, summary=None):
         "ok" if share < MAX_OUTSIDE_SUPPORT else "WARN",
         f"{c['outside_support']} of {n_eval} log-density evaluations ({share:.1%}) fell outside the physical "
         f"support ({condition}): the posterior presses against the model's limit")
-    # the fit's own guard rails (skinfit.guardrails), as stored in the file; their messages are
+    # the fit's own guard rails (skinfit.inference.guardrails), as stored in the file; their messages are
     # the issues, the bound row above them only summarises
     bounds = [w.get("parameter") or "" for w in fit.warnings if w.get("check") == "bound"]
     add("posterior mass on a prior bound", "; ".join(bounds) or "none",
@@ -233,11 +233,11 @@ def fit_diagnostics(fit, summary=None):
     for n in fit.notes:  # information the guard rails recorded, not failures (--strict ignores them)
         add(f"note: {n.get('check', 'unnamed')}" + (f" ({n['parameter']})" if n.get("parameter") else ""),
             n.get("message", ""), "information, not a failure", "info")
-    if "misfit" in fit.attrs:  # skinfit.misfit; its warnings are issues through the rows above
+    if "misfit" in fit.attrs:  # skinfit.analysis.misfit; its warnings are issues through the rows above
         r = fit.attr("misfit")
         bad = any(c["warn"] for c in r["checks"]) or bool(r.get("pareto_k") and r["pareto_k"]["warn"])
         rows.append(("fit to the data: smallest posterior-predictive p", min(c["p"] for c in r["checks"]),
-                     f">= {r['alpha']:g} / {r['m']} checks (skinfit.misfit), {r['draws']} draws",
+                     f">= {r['alpha']:g} / {r['m']} checks (skinfit.analysis.misfit), {r['draws']} draws",
                      "WARN" if bad else "ok"))
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.attrs.get("map_log_density", float("nan"))),

@@ -348,7 +348,7 @@ def _build_tree(post, run, map_result, rng, n_prior_draws, *, seed, importance=(
         dims[c] = ["obs_id"]
     ds = post.dataset
     attrs = {
-        "skinfit_schema": integrity.CHECKED_SCHEMA,  # saved with checksums (skinfit.integrity)
+        "skinfit_schema": integrity.CHECKED_SCHEMA,  # saved with checksums (skinfit.io.integrity)
         "model_id": post.model.id, "model_sha256": post.model.sha256, "model_card": post.model.card_text,
         "priors_id": post.priors.id, "priors_sha256": post.priors.sha256, "priors_text": post.priors.text,
         "dataset_id": ds.id, "dataset_sha256": ds.sha256, "dataset_path": ds.path,
@@ -731,8 +731,8 @@ class Fit:
         table = _summary_from_attr(self._tree.attrs.get(SUMMARY_ATTR), key, self._slot_names())
         if table is None:
             table = self._compute_summary()
-        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.guardrails, skinfit.misfit)
-        table.attrs["notes"] = self.notes  # information, not failures (skinfit.guardrails)
+        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.inference.guardrails, skinfit.analysis.misfit)
+        table.attrs["notes"] = self.notes  # information, not failures (skinfit.inference.guardrails)
         self._summary = (key, table)
         return table.copy()
 
@@ -1022,7 +1022,7 @@ class _StoredGroups:
         self.identity = self._identity()
         self.names = []
         self.order = []
-        self.sealed = False  # its bytes checked against the sha256 they end with (skinfit.integrity)
+        self.sealed = False  # its bytes checked against the sha256 they end with (skinfit.io.integrity)
         self.record = None  # else its content's checksums, checked as each group is read
 
     def _identity(self):

@@ -1,6 +1,6 @@
 """An example skinfit plug-in: one physics function, its model card and its prior file.
 
-skinfit finds it through the ``skinfit.io.models`` entry point (see pyproject.toml), which loads
+skinfit finds it through the ``skinfit.models`` entry point (see pyproject.toml), which loads
 :data:`SKINFIT`: the forward functions it registers and the folder of its cards.
 """
 

@@ -531,7 +531,7 @@ class PopulationResult:
             post["corr"] = self.corr
             dims["corr"] = ["parameter", "parameter_b"]
         coords = {"parameter": self.parameters, "parameter_b": self.parameters, "subject": self.subjects}
-        attrs = {"kind": "skinfit.analysis.population.population", integrity.SCHEMA_ATTR: integrity.CHECKED_SCHEMA, "model_id": self.model_id,
+        attrs = {"kind": "skinfit.population", integrity.SCHEMA_ATTR: integrity.CHECKED_SCHEMA, "model_id": self.model_id,
                  "families": json.dumps(dict(zip(self.parameters, self.families))),
                  # not "coordinates": netCDF readers take that for CF's list of coordinate variables and drop it
                  "population_coordinates": json.dumps(dict(zip(self.parameters, self.coordinates))),
@@ -591,12 +591,12 @@ def load_population(path):
     except (OSError, ValueError, KeyError, TypeError, IndexError, RuntimeError, MemoryError) as exc:
         raise InputError(path, f"not a readable skinfit population result ({type(exc).__name__}: "
                                f"{' '.join(str(exc).split())[:200]})") from None
-    if tree.attrs.get("kind") != "skinfit.analysis.population.population" and integrity.RECORD not in tree.attrs:
+    if tree.attrs.get("kind") != "skinfit.population" and integrity.RECORD not in tree.attrs:
         raise InputError(path, "not a skinfit population result")
     record = integrity.take(path, tree.attrs, list(tree.children), sealed=sealed,
                             unversioned=1)  # a result written before checksums has no schema: 1
     integrity.verify(path, record, groups=integrity.groups_of(tree))
-    if tree.attrs.get("kind") != "skinfit.analysis.population.population":
+    if tree.attrs.get("kind") != "skinfit.population":
         raise InputError(path, "not a skinfit population result")
     try:  # an old file (no checksums) damaged where an attribute or group was: one line, not a traceback
         post = tree["posterior"].to_dataset()
