@@ -27,6 +27,7 @@ _PUBLIC = {
     "population": "skinfit.analysis.population.population",
     "load_population": "skinfit.analysis.population.population",
     "PopulationResult": "skinfit.analysis.population.population",
+    "population_tables": "skinfit.analysis.population.population",
     "design": "skinfit.analysis.design", "run_sbc": "skinfit.analysis.sbc",
     # errors and warnings
     "InputError": "skinfit.errors", "InputTypeError": "skinfit.errors", "ForwardError": "skinfit.errors",
