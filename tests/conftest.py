@@ -60,3 +60,16 @@ def refused(capsys):
         assert {p: p.read_bytes() for p in where.rglob("*") if p.is_file()} == files
 
     return check
+
+
+#: Files whose tests exercise the mechanics around the numbers (figures drawn and laid out,
+#: reports in a browser, processes killed and resumed, campaigns, the demo): marked
+#: ``mechanics``, left out of the default run (the README's test command) and run by .ci/run.
+MECHANICS = {"test_browser.py", "test_campaign.py", "test_demo.py", "test_figure_files.py", "test_figure_store.py",
+             "test_plots.py", "test_report.py", "test_report_groups.py", "test_soak.py"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in MECHANICS:
+            item.add_marker(pytest.mark.mechanics)
