@@ -122,7 +122,7 @@ def test_kill_midway_then_restart_runs_only_unfinished(tmp_path):
     data, _ = write_population(tmp_path, n_subjects=4)
     path = _campaign(tmp_path, data.name, "killed", seed=8)
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "skinfit.apps.cli", "campaign", str(path), "--workers", "1"],
+    proc = subprocess.Popen([sys.executable, "-m", "skinfit", "campaign", str(path), "--workers", "1"],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.time() + 180

@@ -69,7 +69,7 @@ from skinfit.io.outputs import check_outputs
 from skinfit.io.units import NONNEGATIVE, dimension, same_dimension, to_si
 
 __all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
-           "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "load_design", "cli_design"]
+           "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "load_design", "FILES"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 #: (outer x inner x candidate) cells per vectorised block of the nested estimators
@@ -1558,51 +1558,3 @@ def design_section_html(result, figdir):
 #: The files :meth:`DesignResult.write` writes.
 FILES = ("plan.csv", "candidates.csv", "baseline.csv", "comparison.csv", "sd.csv", "discrimination.csv",
          "design.json", "eig.png")
-
-
-def cli_design(args):
-    """``skinfit design MODEL --candidates FILE --n N [--from FIT] [--params A,B] [--discriminate M ...]
-    [--sigma S] [--seed S] [--out DIR]``."""
-    from skinfit.results.fit import load_fit
-    from skinfit.io.models import load_model
-
-    if args.n <= 0:
-        raise InputError("--n", f"the number of measurements must be > 0 (got {args.n})")
-    created = False
-    if args.out:  # made (or refused: an earlier design there, unless --overwrite) before the work
-        check_outputs(args.out, FILES, command="skinfit design", overwrite=args.overwrite)
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise InputError("--out", f"{out} is a file, not a folder")
-        created = not out.exists()
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-            probe = out / ".skinfit-write-test"
-            probe.touch()
-            probe.unlink()
-        except OSError as exc:
-            raise InputError("--out", f"cannot write into {out} ({exc.strerror or exc})") from None
-    try:
-        return _cli_design_run(args, load_fit, load_model)
-    except BaseException:
-        if created and not any(Path(args.out).iterdir()):  # nothing written: leave no empty folder behind
-            Path(args.out).rmdir()
-        raise
-
-
-def _cli_design_run(args, load_fit, load_model):
-    params = [p.strip() for p in args.params.split(",")] if args.params else None
-    if args.from_fit:
-        source = load_fit(args.from_fit)
-        if source.model_id != load_model(args.model).id:
-            raise InputError("--from", f"fit {args.from_fit} is of model {source.model_id!r}, not {args.model!r}")
-    else:
-        source = args.model
-    result = design(source, args.candidates, n=args.n, params=params, rng=args.seed,
-                    discriminate=args.discriminate or (), baseline=args.baseline, noise_scale=args.sigma,
-                    n_outer=args.outer, n_inner=args.inner)
-    print(result.text())
-    if args.out:
-        out = result.write(args.out, overwrite=args.overwrite)
-        print(f"\nwritten: {out / 'plan.csv'} (user units), candidates.csv, comparison.csv, sd.csv, eig.png")
-    return 0

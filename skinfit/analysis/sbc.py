@@ -42,7 +42,7 @@ from skinfit.posterior import Posterior
 from skinfit.io.priors import PriorSet, load_priors
 from skinfit.inference.workers import forkable
 
-__all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "cli_sbc"]
+__all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "markdown_table", "FILES"]
 
 
 @dataclass(frozen=True)
@@ -368,19 +368,3 @@ def write_sbc(result, out, *, overwrite=False):
                                 f"settings {json.dumps(result.settings)}\n\n{markdown_table(result)}\n")
     plot_ranks(result, out / "ranks.png")
     return out
-
-
-def cli_sbc(args):
-    """``skinfit sbc MODEL [--dataset D] [--n-sims N] [--draws L] [--rows N] [--seed S] [--jobs J]
-    [--out DIR]``."""
-    if args.out:  # an earlier run there: refused before the simulations, unless --overwrite
-        check_outputs(args.out, FILES, command="skinfit sbc", overwrite=args.overwrite)
-    result = run_sbc(args.model, args.dataset, n_sims=args.n_sims, seed=args.seed, n_draws=args.draws,
-                     n_rows=args.rows, ess_target=args.ess, max_steps=args.max_steps, jobs=args.jobs,
-                     progress=print)
-    print(markdown_table(result))
-    print(f"\n{len(result.ranks)} simulations; {'all parameters pass' if result.passed else 'NOT calibrated'} "
-          f"at the {result.settings['alpha']:.0%} level")
-    if args.out:
-        print(f"written: {write_sbc(result, args.out, overwrite=args.overwrite)}")
-    return 0 if result.passed else 1

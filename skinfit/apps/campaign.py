@@ -79,7 +79,6 @@ import hashlib
 import json
 import os
 import socket
-import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -107,7 +106,7 @@ from skinfit.inference.sampling import sampler_settings
 from skinfit.io.arguments import check_count
 from skinfit.inference.workers import check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
 
-__all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit", "cli_campaign"]
+__all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit"]
 
 _TOP_KEYS = {"schema_version", "seed", "out", "models", "datasets", "by", "scheduler", "workers", "threads",
              "fit", "priors", "split"}
@@ -525,25 +524,3 @@ def _key(task):
 
 def _now():
     return time.strftime("%Y-%m-%dT%H:%M:%S")
-
-
-def cli_campaign(args):
-    """``skinfit campaign``: run a campaign file and print its index."""
-    t0 = time.perf_counter()
-    check_scheduler(args.scheduler)  # before the campaign's cards and data are read
-    campaign = load_campaign(args.campaign)
-    as_json = getattr(args, "json", False)
-    echo = (lambda *a, **k: print(*a, **k, file=sys.stderr)) if as_json else print
-    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers,
-                         threads=getattr(args, "threads", None), echo=echo)
-    failed = ~table["status"].isin(["done", "complete"])
-    if as_json:
-        print(json.dumps({"index": str(campaign.out / "index.csv"), "failed": int(failed.sum()),
-                          "fits": json.loads(table.to_json(orient="records"))}, indent=2))
-        return 1 if failed.any() else 0
-    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
-        print(table.drop(columns=["path", "worker", "threads", "dataset_path", "dataset_sha256"]).to_string(index=False))
-    unconverged = sum(c is False for c in table["converged"])
-    print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
-          f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")
-    return 1 if failed.any() else 0

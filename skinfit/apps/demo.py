@@ -11,7 +11,6 @@ this process compares the fits and runs the population; the report then copies t
 
 import json
 import os
-import sys
 import time
 import zlib
 from collections import Counter
@@ -267,10 +266,3 @@ def _analyses(fits, plan, out, seed, echo):
         echo(f"\npopulation of {', '.join(populations) or 'none'} and {len(contrasts)} contrast table(s): "
              f"{time.perf_counter() - t0:.1f} s")
     return comparisons, populations, contrasts
-
-
-def cli_demo(args):
-    run_demo(args.out, args.report or str(Path(args.out) / "report"), seed=args.seed, jobs=args.jobs,
-             datasets=args.dataset)
-    sys.stdout.flush()
-    return 0
