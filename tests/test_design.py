@@ -209,7 +209,7 @@ def test_same_seed_same_plan():
 
 
 def test_report_section_shows_plan_comparison_and_figure(tmp_path):
-    from skinfit.analysis.design import design_section_html
+    from skinfit.report.design import design_section_html
 
     cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
                                                                                           "values": [0, 200]}}}

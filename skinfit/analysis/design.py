@@ -69,7 +69,7 @@ from skinfit.io.outputs import check_outputs
 from skinfit.io.units import NONNEGATIVE, dimension, same_dimension, to_si
 
 __all__ = ["DesignProblem", "DesignResult", "design", "gaussian_problem", "read_candidates", "eig_nmc", "laplace_gains",
-           "greedy_plan", "batch_eig", "discrimination_plan", "plot_eig", "design_section_html", "load_design", "FILES"]
+           "greedy_plan", "batch_eig", "discrimination_plan", "load_design", "FILES"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 #: (outer x inner x candidate) cells per vectorised block of the nested estimators
@@ -1040,9 +1040,10 @@ class DesignResult:
         return lines
 
     def write(self, out, *, overwrite=False):
-        """plan.csv (ready to run), candidates.csv, baseline.csv, comparison.csv, sd.csv,
-        design.json (settings and what :func:`load_design` needs), eig.png (:data:`FILES`). A
-        folder holding an earlier design's files is refused unless ``overwrite``."""
+        """plan.csv (ready to run), candidates.csv, baseline.csv, comparison.csv, sd.csv and
+        design.json (settings and what :func:`load_design` needs); the figure is
+        :func:`skinfit.plots.design.plot_eig`'s.  A folder holding an earlier design's files
+        (:data:`FILES`) is refused unless ``overwrite``."""
         check_outputs(out, FILES, command="skinfit design", overwrite=overwrite)
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -1056,7 +1057,6 @@ class DesignResult:
         doc = {**self.settings, "_result": {"model_id": self.model_id, "covariates": list(self.covariates),
                                             "units": self.units, "plot": self.plot}}
         (out / "design.json").write_text(json.dumps(doc, indent=2, default=str))
-        plot_eig(self, out / "eig.png")
         return out
 
 
@@ -1473,45 +1473,7 @@ def _restrict_to_support(problem, designs, chunk=None):
                    **keep), int((~ok).sum())
 
 
-# ---- figure, report section, command line -------------------------------------------------------
-def plot_eig(result, path=None):
-    """EIG of one measurement (nats, with +-2 MC standard errors) against the model's natural x
-    axis (the card's ``[plot] x``, else the first covariate), one line per value of the other
-    covariates (at most 8 shown); the plan's points marked with how often each is used."""
-    from skinfit.plots.figures import _finish, _new_figure
-
-    t = result.table
-    xname = result.plot.get("x")
-    fig = _new_figure(6.4, 4.0)
-    ax = fig.add_subplot()
-    xcol = f"{xname} [{result.units[xname]}]" if xname else None
-    others = [c for c in t.columns if c.endswith("]") and c != xcol]
-    groups = list(t.groupby(others, sort=True)) if others else [((), t)]
-    if len(groups) > 8:
-        keep = np.unique(np.linspace(0, len(groups) - 1, 8).round().astype(int))
-        groups = [groups[i] for i in keep]
-    for key, g in groups:
-        key = key if isinstance(key, tuple) else (key,)
-        label = ", ".join(f"{c.split(' [')[0]} {v:g} {c.split('[')[1][:-1]}" for c, v in zip(others, key)) or None
-        x = g[xcol].to_numpy() if xcol else np.arange(len(g))
-        order = np.argsort(x, kind="stable")
-        x, e, se = x[order], g["eig"].to_numpy()[order], g["eig_se"].to_numpy()[order]
-        line, = ax.plot(x, e, marker=".", label=label)
-        ax.fill_between(x, e - 2 * se, e + 2 * se, color=line.get_color(), alpha=0.2, linewidth=0)
-        used = g["in_plan"].to_numpy()[order] > 0
-        ax.scatter(x[used], e[used], s=30 + 20 * g["in_plan"].to_numpy()[order][used], facecolors="none",
-                   edgecolors="k", zorder=3)
-    if result.plot.get("xscale") == "log":
-        ax.set_xscale("log")
-    ax.set_xlabel(xcol or "candidate")
-    ax.set_ylabel("expected information gain of one measurement [nats]")
-    ax.set_title(f"{result.model_id}: targets {', '.join(result.settings['params'])}; circles = plan "
-                 f"(size = repeats)", fontsize=9)
-    if len(groups) > 1:
-        ax.legend(fontsize=7)
-    return _finish(fig, path)
-
-
+# ---- the result on disk ----------------------------------------------------------------------
 def load_design(out):
     """The :class:`DesignResult` that :meth:`DesignResult.write` wrote into folder ``out``."""
     out = Path(out)
@@ -1528,33 +1490,7 @@ def load_design(out):
                         tables["plan"], tables["baseline"], comparison, sd, doc, disc, meta.get("plot") or {})
 
 
-def design_section_html(result, figdir):
-    """A self-contained HTML section (string) for a report: the EIG figure (written to
-    ``figdir/design_<model>.png``), plan vs baseline, predicted sds and the plan."""
-    import html
-
-    figdir = Path(figdir)
-    figdir.mkdir(parents=True, exist_ok=True)
-    name = f"design_{result.model_id}.png"
-    plot_eig(result, figdir / name)
-    s = result.settings
-    parts = [f"<section id=\"design-{html.escape(result.model_id)}\"><h2>Design the next experiment: "
-             f"{html.escape(result.model_id)}</h2>",
-             f"<p>{len(result.plan)} measurements chosen from {s['candidates']} candidates by "
-             f"{html.escape(s['selection'])}, starting from {html.escape(s['start'])}; targets "
-             f"{html.escape(', '.join(s['params']))}; seed {s['seed']}. Baseline: {html.escape(s['baseline'])}. "
-             f"Single-candidate EIG: {html.escape(s['eig_single'])}; batch EIG: {html.escape(s['eig_batch'])}. "
-             f"Laplace values are {html.escape(s['laplace'])}.</p>",
-             f"<img src=\"{html.escape(figdir.name)}/{name}\" alt=\"expected information gain over the candidates\">",
-             "<h3>Plan vs baseline</h3>", result.comparison.to_html(float_format=lambda v: f"{v:.3g}"),
-             "<h3>Predicted posterior sd</h3>", result.sd.to_html(float_format=lambda v: f"{v:.3g}")]
-    if result.discrimination is not None:
-        parts += ["<h3>Discrimination</h3>", result.discrimination.to_html(index=False, float_format=lambda v: f"{v:.3g}")]
-    parts += ["<h3>Plan (user units)</h3>", result.plan.to_html(index=False, float_format=lambda v: f"{v:.4g}"),
-              "</section>"]
-    return "\n".join(parts)
-
-
-#: The files :meth:`DesignResult.write` writes.
+#: The files ``skinfit design --out`` writes: :meth:`DesignResult.write`'s and the EIG figure
+#: (``eig.png``, :func:`skinfit.plots.design.plot_eig`).
 FILES = ("plan.csv", "candidates.csv", "baseline.csv", "comparison.csv", "sd.csv", "discrimination.csv",
          "design.json", "eig.png")

@@ -845,7 +845,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
         from markupsafe import Markup
 
-        from skinfit.analysis.design import design_section_html
+        from skinfit.report.design import design_section_html
 
         design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id, "issues": design_issues(d),
                             "html": Markup(design_section_html(d, figdir))} for d in designs]

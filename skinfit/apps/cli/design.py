@@ -7,6 +7,7 @@ from skinfit.analysis.design import FILES, design
 from skinfit.errors import InputError
 from skinfit.io.models import load_model
 from skinfit.io.outputs import check_outputs
+from skinfit.plots.design import plot_eig
 from skinfit.results.fit import load_fit
 
 __all__ = ["run"]
@@ -53,5 +54,6 @@ def _design(args):
     print(result.text())
     if args.out:
         out = result.write(args.out, overwrite=args.overwrite)
+        plot_eig(result, out / "eig.png")
         print(f"\nwritten: {out / 'plan.csv'} (user units), candidates.csv, comparison.csv, sd.csv, eig.png")
     return 0

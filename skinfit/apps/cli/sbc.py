@@ -2,6 +2,7 @@
 
 from skinfit.analysis.sbc import FILES, markdown_table, run_sbc, write_sbc
 from skinfit.io.outputs import check_outputs
+from skinfit.plots.sbc import plot_ranks
 
 __all__ = ["run"]
 
@@ -18,5 +19,7 @@ def run(args):
     print(f"\n{len(result.ranks)} simulations; {'all parameters pass' if result.passed else 'NOT calibrated'} "
           f"at the {result.settings['alpha']:.0%} level")
     if args.out:
-        print(f"written: {write_sbc(result, args.out, overwrite=args.overwrite)}")
+        out = write_sbc(result, args.out, overwrite=args.overwrite)
+        plot_ranks(result, out / "ranks.png")
+        print(f"written: {out}")
     return 0 if result.passed else 1
