@@ -26,7 +26,7 @@ from skinfit.io.arguments import check_number, shown
 from skinfit.errors import InputError, InputTypeError
 from skinfit.results.fit import Fit, _slot_values, as_fit, as_generator
 from skinfit.analysis.groups import load_groups
-from skinfit.analysis.population.population import subject_digest
+from skinfit.analysis.population.inputs import subject_digest
 from skinfit.analysis.population.checks import check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]

@@ -1002,7 +1002,7 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
         pop_result = populations.get(model_id)
         pop_info = population_section(pop_result) if pop_result is not None else None
         if pop_info is not None:
-            from skinfit.analysis.population.population import DERIVED
+            from skinfit.analysis.population.result import DERIVED
 
             pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
             if pop_info["effects"] is not None:
@@ -1176,7 +1176,7 @@ def _saved_populations(paths):
     out = []
     for p in dict.fromkeys(Path(p) / "population" / "population.nc" for p in paths):
         if p.is_file():
-            from skinfit.analysis.population.population import load_population  # only then: it imports scipy.stats
+            from skinfit.analysis.population.result import load_population  # only then: it imports scipy.stats
 
             try:
                 out.append(load_population(p))

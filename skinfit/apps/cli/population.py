@@ -9,7 +9,8 @@ from pathlib import Path
 import pandas as pd
 
 from skinfit.analysis.population.checks import FAMILIES
-from skinfit.analysis.population.population import BURN, PopulationWarning, population, population_tables
+from skinfit.analysis.population.population import BURN, population, population_tables
+from skinfit.analysis.population.result import PopulationWarning
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import CheckpointLock, replace_atomic
 from skinfit.io.outputs import check_outputs
