@@ -17,9 +17,8 @@ import pandas as pd
 
 from skinfit.io.arguments import check_seed
 from skinfit.errors import InputError
-from skinfit.analysis.evidence import METHODS, evidence
+from skinfit.analysis.evidence import METHODS, bayes_factor_strength, evidence
 from skinfit.results.fit import as_fits
-from skinfit.analysis.evidence_methods import bayes_factor_strength
 from skinfit.results.run_labels import run_labels
 
 __all__ = ["compare", "loo", "loo_record"]
