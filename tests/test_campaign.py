@@ -406,9 +406,9 @@ def test_class4_inside_refuses_paths_that_leave_out(tmp_path):
 
 
 def test_class4_write_side_check_refuses_ids_the_card_reader_would_pass_on():
-    """The campaign's own guard (skinfit.analysis.groups.check_name) refuses path syntax even when an id
+    """The campaign's own guard (skinfit.io.campaign_file.check_name) refuses path syntax even when an id
     reaches it by another route than a card (e.g. a Dataset built in Python)."""
-    from skinfit.analysis.groups import check_name
+    from skinfit.io.campaign_file import check_name
 
     assert check_name("electroadhesion_synthetic", "dataset id", "c.toml") == "electroadhesion_synthetic"
     for bad in ("../../x", "/tmp/abs", "a/b", "..", ".hidden", "a b", ""):

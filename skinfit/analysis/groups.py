@@ -41,13 +41,10 @@ from skinfit.errors import InputError, error_line
 from skinfit.results.fit import fit, load_fit, resolve_inputs
 from skinfit.io.provenance import input_lines, input_record
 
-__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
+__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "inside", "check_out_dir",
            "read_index", "index_document", "read_inputs",
            "record_source", "source_problem", "data_drift", "listed_problem", "reading", "index_drift",
-           "missing_groups"]
-
-#: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
-NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+           "missing_groups", "write_json"]
 
 
 def derive_seed(seed, *key):
@@ -93,14 +90,6 @@ def group_dir(label):
     """
     slug = re.sub(r"[^A-Za-z0-9._-]", "_", label.replace("=", "-"))[:60].lstrip("._-") or "g"
     return f"{slug}-{hashlib.sha256(label.encode()).hexdigest()[:8]}"
-
-
-def check_name(value, what, where):
-    """``value`` if it is a name fit for a folder (:data:`NAME`), else an InputError."""
-    if not isinstance(value, str) or not NAME.match(value) or value in (".", ".."):
-        raise InputError(where, f"{what} {value!r} cannot name a result folder: expected a name of letters, "
-                         "digits, '.', '_' and '-' starting with a letter or digit (no '/', no '..')")
-    return value
 
 
 def inside(out, path):
@@ -226,7 +215,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
                              progress=progress, ess_target=ess_target, max_steps=max_steps, **fit_options)
             except Exception as exc:  # this group's fit fails alone: listed with its error, the others go on
                 failed.append({"group": label, "rows": len(sub), "seed": group_seed, "error": error_line(exc)})
-                _write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
+                write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
                 first = first or exc
                 continue
             record_source(result, dataset, label, by)
@@ -236,7 +225,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
             rows.append({"group": label, "rows": len(sub), "seed": group_seed, "converged": result.converged,
                          "warnings": len(result.warnings), "seconds": round(time.perf_counter() - t0, 3),
                          "path": rel.as_posix()})
-            _write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
+            write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
     if not rows and first is not None:  # every group failed (a bad option fails them all): the first error
         raise first
     table = pd.DataFrame([{**r, "status": "done"} for r in rows] + [
@@ -525,8 +514,9 @@ def _inputs_text(keys):
     return " and ".join(parts + (["another grouping"] if "by" in keys else []))
 
 
-def _write_json(path, doc):
-    """Write JSON atomically (temporary file + rename)."""
+def write_json(path, doc):
+    """Write JSON atomically (temporary file + rename): an index or record that readers may
+    open at any time."""
     from skinfit.inference.checkpoint import replace_atomic
 
     replace_atomic(path, json.dumps(doc, indent=1, default=str).encode())
