@@ -2,23 +2,19 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Sequence
-    from skinfit.results.fit import Fit
-
 import json
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+import xarray as xr
+from arviz_stats import loo as az_loo
 
 from skinfit.io.arguments import check_seed
 from skinfit.errors import InputError
 from skinfit.analysis.evidence import METHODS, bayes_factor_strength, evidence
-from skinfit.results.fit import as_fits
+from skinfit.results.fit import Fit, as_fits
 from skinfit.results.run_labels import run_labels
 
 __all__ = ["compare", "loo", "loo_record"]
@@ -26,9 +22,6 @@ __all__ = ["compare", "loo", "loo_record"]
 
 def loo(fit):
     """PSIS-LOO of a fit (ArviZ); several observables are summed per data row."""
-    import xarray as xr
-    from arviz_stats import loo as az_loo  # ~1-3 s to import: only where LOO is computed
-
     tree = fit.idata
     ll = tree["log_likelihood"].to_dataset()
     names = list(ll.data_vars)

@@ -24,6 +24,7 @@ import json
 import multiprocessing
 import threading
 import warnings
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,7 +35,7 @@ from scipy import stats
 from skinfit.io.arguments import check_count, check_memory, check_number, shown
 from skinfit.io.data import Dataset, list_datasets, load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, InputTypeError
-from skinfit.results.fit import check_sizes, default_walkers
+from skinfit.results.fit import _slot_values, check_sizes, default_walkers, fit
 from skinfit.io.models import Model, load_model
 from skinfit.io.outputs import check_outputs
 from skinfit.posterior import Posterior
@@ -104,8 +105,6 @@ def _draw_truth(post, rng, batch=64, max_batches=200):
 
 def _slot_draws(fit, names):
     """Posterior draws (n, d) in the order of the sampled slots ``names``."""
-    from skinfit.results.fit import _slot_values
-
     ds = fit.group("posterior")
     slots = {s["name"]: s for s in fit.attr("slots")}
     return np.column_stack([_slot_values(ds, slots[n]) for n in names])
@@ -210,8 +209,6 @@ class _Job:
     seed: int
 
     def __call__(self, item):
-        from skinfit.results.fit import fit
-
         i, ss = item
         rng = np.random.default_rng(ss)
         fit_seed = int(rng.integers(2**63 - 1))
@@ -259,8 +256,6 @@ def _map(job, items, jobs):
                       "from a shell for parallel ones)", UserWarning, stacklevel=3)
         yield from map(job, items)
         return
-    from concurrent.futures import ProcessPoolExecutor
-
     ctx = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(min(jobs, len(items)), mp_context=ctx, initializer=_init_worker,
                              initargs=(job,)) as pool:

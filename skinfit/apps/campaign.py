@@ -332,7 +332,8 @@ def _run_locked(campaign, scheduler, workers, threads, echo):
 
 
 def _run_dask(campaign, todo, scheduler, workers, threads, finish):
-    distributed = require_optional("distributed", "dask")  # checked before the run (check_scheduler)
+    # the optional dask extra, imported only for a Dask executor (checked before the run: check_scheduler)
+    distributed = require_optional("distributed", "dask")
     Client, LocalCluster, dask_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
 
     cluster = None
