@@ -45,7 +45,7 @@ def hdi(x, prob):
     """Highest-density interval of 1-D draws ``x``: the narrowest interval between two sorted
     draws holding ``floor(prob * n)`` steps of them, ``(lower, upper)``, as
     ``arviz_stats.hdi(x, prob)`` ("nearest" method) gives it (tests/test_contrasts.py checks
-    that), without importing arviz_stats (~0.5 s) into a report that needs nothing else of it."""
+    that)."""
     x = np.sort(np.asarray(x, dtype=float).ravel())
     if not 0 < prob <= 1 or len(x) == 0:
         raise ValueError(f"expected draws and 0 < prob <= 1 (got {len(x)} draws, prob {prob})")
