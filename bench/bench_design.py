@@ -41,6 +41,8 @@ import skinfit
 from skinfit.io import paths
 from skinfit.io import registry
 from skinfit.io.data import Dataset
+from skinfit.analysis.design.model_problem import log_coordinates, noise_setup, prior_problem
+from skinfit.analysis.design.problem import restrict_to_support
 from skinfit.io.units import to_si
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -59,9 +61,9 @@ def speed(seed):
                      "voltage": {"unit": "V", "from": 0, "to": 200, "num": 20}}}
     X, _ = design_mod.read_candidates(grid, model)
     rng = np.random.default_rng(seed)
-    noise, sigma = design_mod._noise_setup(model, priors, {"tangential_force": "normal"}, SIGMA)
-    problem = design_mod._prior_problem(model, priors, rng, 4000, noise, sigma)
-    problem, dropped = design_mod._restrict_to_support(problem, [X])
+    noise, sigma = noise_setup(model, priors, {"tangential_force": "normal"}, SIGMA)
+    problem = prior_problem(model, priors, rng, 4000, noise, sigma)
+    problem, dropped = restrict_to_support(problem, [X])
     rows = []
     t0, c0 = time.perf_counter(), time.process_time()
     got = design_mod.eig_nmc(problem, X, rng, n_outer=400, n_inner=400)
@@ -124,7 +126,7 @@ def study_eig(n_exp, seed):
     truths = _truths("electroadhesion", list(designs.values()), n_exp, rng)
     priors = skinfit.load_priors("electroadhesion")
     names = list(result.sd.index)
-    is_log = design_mod._coordinates(priors, names)
+    is_log = log_coordinates(priors, names)
     var = {k: [] for k in designs}
     nonconv = {k: 0 for k in designs}
     t0 = time.perf_counter()

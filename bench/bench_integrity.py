@@ -7,7 +7,7 @@ Two studies, written to bench/results/integrity.md:
   alignments; a sample of those inside the variables' values), the file as saved (with the
   sha256 of its bytes at its end) and without that trailer (the content checksums alone): each
   damaged copy is read as skinfit reads it (:func:`skinfit.load_fit`, then its pointwise
-  groups; :func:`skinfit.analysis.population.population.load_population`) in a forked process. Each outcome is one
+  groups; :func:`skinfit.analysis.population.result.load_population`) in a forked process. Each outcome is one
   of ``refused`` (an InputError of one line naming the file), ``same`` (read, every group and
   attribute identical to the undamaged file's: the window held only zeros already, or nothing
   that is read), ``CHANGED`` (read, some number or text differs: the class this guards
@@ -55,7 +55,7 @@ def _read_fit(path):
 
 
 def _read_population(path):
-    from skinfit.analysis.population.population import load_population
+    from skinfit.analysis.population.result import load_population
 
     return load_population(path).to_datatree()
 

@@ -20,7 +20,8 @@ import warnings
 from pathlib import Path
 
 from skinfit.analysis.groups import fit_by
-from skinfit.analysis.population.population import load_run, population
+from skinfit.analysis.population.inputs import load_run
+from skinfit.analysis.population.population import population
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from skinfit import __version__
 from skinfit.analysis.sbc import markdown_table, run_sbc, write_sbc
+from skinfit.plots.sbc import plot_ranks
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: model -> rows of its design used (fewer rows: cheaper fits, wider posteriors; the design's
@@ -46,7 +47,7 @@ def main(argv=None):
         result = run_sbc(model, n_sims=args.n_sims, n_draws=99, n_rows=FAMILIES.get(model), seed=args.seed,
                          max_steps=args.max_steps, jobs=args.jobs, progress=lambda m, model=model: print(f"{model}: {m}", flush=True))
         wall = time.perf_counter() - t0
-        write_sbc(result, RESULTS / "sbc" / model, overwrite=True)
+        plot_ranks(result, write_sbc(result, RESULTS / "sbc" / model, overwrite=True) / "ranks.png")
         t = result.table
         rows.append(f"| {model} | {result.dataset} ({result.settings['n_rows']} rows) | {len(result.ranks)} | "
                     f"{len(t)} | {t['p_min'].min():.3g} ({t['p_min'].idxmin()}) | {int(t['pass'].sum())}/{len(t)} | "

@@ -25,15 +25,15 @@ _PUBLIC = {
     "fit_by": "skinfit.analysis.groups", "load_groups": "skinfit.analysis.groups",
     "level_contrasts": "skinfit.analysis.contrasts", "fit_contrasts": "skinfit.analysis.contrasts",
     "population": "skinfit.analysis.population.population",
-    "load_population": "skinfit.analysis.population.population",
-    "PopulationResult": "skinfit.analysis.population.population",
+    "load_population": "skinfit.analysis.population.result",
+    "PopulationResult": "skinfit.analysis.population.result",
     "population_tables": "skinfit.analysis.population.population",
     "design": "skinfit.analysis.design", "run_sbc": "skinfit.analysis.sbc",
     # errors and warnings
     "InputError": "skinfit.errors", "InputTypeError": "skinfit.errors", "ForwardError": "skinfit.errors",
     "MissingDependency": "skinfit.errors", "WorkerError": "skinfit.errors",
     "ConvergenceWarning": "skinfit.errors", "SupportWarning": "skinfit.errors", "IntegrityWarning": "skinfit.errors",
-    "MisfitWarning": "skinfit.analysis.misfit", "PopulationWarning": "skinfit.analysis.population.population",
+    "MisfitWarning": "skinfit.analysis.misfit", "PopulationWarning": "skinfit.analysis.population.result",
     "ShadowWarning": "skinfit.io.provenance",
 }
 

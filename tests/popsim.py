@@ -18,7 +18,8 @@ import pandas as pd
 from skinfit.io.data import Column, Dataset
 from skinfit.analysis.population.hierarchical import NU_HYPER
 from skinfit.io.models import load_model
-from skinfit.analysis.population.population import DrawsFit, _prior_moments
+from skinfit.analysis.population.inputs import DrawsFit
+from skinfit.analysis.population.population import _prior_moments
 from skinfit.posterior import Posterior
 from skinfit.io.priors import load_priors
 

@@ -122,7 +122,7 @@ def test_kill_midway_then_restart_runs_only_unfinished(tmp_path):
     data, _ = write_population(tmp_path, n_subjects=4)
     path = _campaign(tmp_path, data.name, "killed", seed=8)
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "skinfit.apps.cli", "campaign", str(path), "--workers", "1"],
+    proc = subprocess.Popen([sys.executable, "-m", "skinfit", "campaign", str(path), "--workers", "1"],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.time() + 180
@@ -406,9 +406,9 @@ def test_class4_inside_refuses_paths_that_leave_out(tmp_path):
 
 
 def test_class4_write_side_check_refuses_ids_the_card_reader_would_pass_on():
-    """The campaign's own guard (skinfit.analysis.groups.check_name) refuses path syntax even when an id
+    """The campaign's own guard (skinfit.io.campaign_file.check_name) refuses path syntax even when an id
     reaches it by another route than a card (e.g. a Dataset built in Python)."""
-    from skinfit.analysis.groups import check_name
+    from skinfit.io.campaign_file import check_name
 
     assert check_name("electroadhesion_synthetic", "dataset id", "c.toml") == "electroadhesion_synthetic"
     for bad in ("../../x", "/tmp/abs", "a/b", "..", ".hidden", "a b", ""):

@@ -209,7 +209,7 @@ def test_same_seed_same_plan():
 
 
 def test_report_section_shows_plan_comparison_and_figure(tmp_path):
-    from skinfit.analysis.design import design_section_html
+    from skinfit.report.design import design_section_html
 
     cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
                                                                                           "values": [0, 200]}}}
@@ -522,12 +522,12 @@ def test_design_arguments_refused_with_an_input_error(tmp_path, kwargs, where, m
 def test_design_too_big_refused_with_its_size_before_work_starts(tmp_path, capsys, monkeypatch, argv, message):
     """Issue 39.14: a 10^6-point grid (a MemoryError asking 29.8 GiB) and --n 1000000 (over 300 s)
     are refused with the estimate, before any draw is checked against the support."""
-    design_mod = sys.modules["skinfit.analysis.design"]
+    design_mod = sys.modules["skinfit.analysis.design.plan"]
 
     def started(*args, **kwargs):
         raise AssertionError("the work started")
 
-    monkeypatch.setattr(design_mod, "_restrict_to_support", started)
+    monkeypatch.setattr(design_mod, "restrict_to_support", started)
     files = {"BIG": GOOD_GRID.replace("values = [200, 2000]", "from = 200\nto = 2000\nnum = 1000")
              .replace("values = [0, 200]", "from = 0\nto = 200\nnum = 1000")}
     argv = [_grid(tmp_path, files[a]) if a in files else a for a in argv]

@@ -10,7 +10,7 @@ from scipy.special import logsumexp
 
 import skinfit
 from skinfit.apps.cli import main
-from skinfit.analysis.evidence_methods import LaplaceError, bayes_factor_strength, bridge_sampling, laplace, nested
+from skinfit.analysis.evidence import LaplaceError, bayes_factor_strength, bridge_sampling, laplace, nested
 
 
 # ---- a linear-Gaussian model: log Z in closed form ----------------------------------------

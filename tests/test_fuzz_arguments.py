@@ -90,7 +90,7 @@ def _no_work(monkeypatch):
     monkeypatch.setattr(importlib.import_module("skinfit.io.arguments"), "available_memory", lambda: MEMORY)
     sbc = importlib.import_module("skinfit.analysis.sbc")
     monkeypatch.setattr(sbc, "_map", _work)
-    evidence = importlib.import_module("skinfit.analysis.evidence")
+    evidence = importlib.import_module("skinfit.analysis.evidence.estimate")
     for name in ("bridge_sampling", "laplace", "nested"):
         monkeypatch.setattr(evidence, name, _work)
     monkeypatch.setattr(importlib.import_module("skinfit.analysis.compare"), "evidence", _work)

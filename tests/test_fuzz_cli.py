@@ -46,9 +46,9 @@ def _work(*args, **kwargs):
 
 #: module -> names replaced by _work: the first step of each command that costs more than reading
 STAND_INS = {"skinfit.results.fit": ["find_map"], "skinfit.analysis.compare": ["evidence"], "skinfit.report.html": ["write_report"],
-             "skinfit.apps.campaign": ["_run_locked"], "skinfit.analysis.population.population": ["run_gibbs", "_reweight"],
+             "skinfit.apps.campaign": ["_run_locked"], "skinfit.analysis.population.population": ["run_gibbs", "reweight"],
              "skinfit.analysis.sbc": ["_map"], "skinfit.apps.demo": ["ProcessPoolExecutor"],
-             "skinfit.analysis.design": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"]}
+             "skinfit.analysis.design.plan": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"]}
 
 
 @pytest.fixture(scope="module")

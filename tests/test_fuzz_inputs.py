@@ -296,7 +296,8 @@ odd_text = st.lists(st.one_of(PATH_BITS, st.characters(blacklist_categories=["Cs
 @settings(max_examples=200, deadline=None)
 @given(labels=st.lists(odd_text, min_size=1, max_size=8, unique=True))
 def test_class2_group_folders_distinct_names_inside_out(labels):
-    from skinfit.analysis.groups import NAME, group_dir, inside
+    from skinfit.analysis.groups import group_dir, inside
+    from skinfit.io.campaign_file import NAME
 
     names = [group_dir(x) for x in labels]
     assert len({n.casefold() for n in names}) == len(labels)  # distinct even on a case-insensitive disk

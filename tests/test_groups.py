@@ -134,7 +134,8 @@ def test_class1_load_groups_warns_when_the_data_changed_since(odd_run, tmp_path)
 
 
 def test_group_dir_is_a_name_distinct_per_exact_label():
-    from skinfit.analysis.groups import NAME, group_dir
+    from skinfit.analysis.groups import group_dir
+    from skinfit.io.campaign_file import NAME
 
     labels = ["a/b", "a b", "a_b", "A_B", "a=b", "a-b", "..", "../../x", "/etc/passwd", "", "é", "e"]
     names = [group_dir(x) for x in labels]

@@ -218,7 +218,8 @@ def test_an_edited_number_is_refused_a_resaved_fit_is_not(run, tmp_path):
 def test_a_damaged_population_file_is_refused(run, tmp_path):
     """population.nc: its checksums are checked on read (load_population, and the report that
     shows it); 4 KiB zeroed in its values is refused in one line naming it."""
-    from skinfit.analysis.population.population import load_population, population
+    from skinfit.analysis.population.population import population
+    from skinfit.analysis.population.result import load_population
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -34,9 +34,13 @@ from skinfit.apps.cli import build_parser, main
 from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
 from skinfit.errors import InputError
 from skinfit.analysis.groups import fit_by, load_groups
-from skinfit.analysis.population.population import PopulationWarning, load_population, load_run, population
+from skinfit.analysis.population.inputs import load_run
+from skinfit.analysis.population.population import population
+from skinfit.analysis.population.result import PopulationWarning, load_population
 
-SOURCES = ("population.py", "population_checks.py", "hierarchical.py", "groups.py", "contrasts.py")
+SOURCES = (*(f"analysis/population/{m}.py" for m in ("population", "checks", "hierarchical", "inputs", "result",
+                                                     "reweight", "cache", "subjects")),
+           "apps/cli/population.py", "analysis/groups.py", "analysis/contrasts.py")
 
 
 @pytest.fixture(scope="module")
@@ -409,7 +413,8 @@ def test_class_non_convergence_the_proposal_maps_the_population_through_product_
     card, d log beta0 = dX / X - d log tau0 + 2/3 d log E_star (the old proposal treated z as
     log theta or theta and accepted 0.5% of a 3-subject population's draws)."""
     from skinfit.io.data import load_dataset
-    from skinfit.analysis.population.hierarchical import Spec, _Subjects
+    from skinfit.analysis.population.hierarchical import Spec
+    from skinfit.analysis.population.subjects import Subjects
     from skinfit.io.models import load_model
     from skinfit.posterior import Posterior
     from skinfit.io.priors import load_priors
@@ -421,7 +426,7 @@ def test_class_non_convergence_the_proposal_maps_the_population_through_product_
     names = list(post.names)
     pop = [names.index(n) for n in ("E_star", "tau0", "d_air", "beta0", "phi", "eta", "alpha")]
     spec = Spec(pop, [True] * 7, [False] * 7, np.zeros(7), np.ones(7), False)
-    subs = _Subjects([post], [(z.mean(axis=0), np.cov(z.T))], spec)
+    subs = Subjects([post], [(z.mean(axis=0), np.cov(z.T))], spec)
     J, zbar = subs.J[0], z.mean(axis=0)
     theta = post.to_theta(zbar[None])[0]
     row = J[3]  # beta0
@@ -442,7 +447,7 @@ def test_class_non_convergence_the_proposal_maps_the_population_through_product_
     def separable(names_in):
         idx = [names.index(n) for n in names_in]
         k = len(idx)
-        return _Subjects([post], [(z.mean(axis=0), np.cov(z.T))],
+        return Subjects([post], [(z.mean(axis=0), np.cov(z.T))],
                          Spec(idx, [True] * k, [False] * k, np.zeros(k), np.ones(k), False)).separable
 
     assert separable(["beta0"]) and not separable(["tau0"]) and not separable(["d_air"])

@@ -175,7 +175,7 @@ def test_report_of_a_run_shows_the_population_saved_for_its_fits_and_never_anoth
     report RUN`: the report shows that population, saying where it is from; once a subject is
     fitted again, the saved one is named as made from other fits and not shown."""
     from skinfit.apps.cli import main
-    from skinfit.analysis.population.population import load_population
+    from skinfit.analysis.population.result import load_population
 
     run = _by_run(subject_fits, tmp_path / "run")
     with warnings.catch_warnings():

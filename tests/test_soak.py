@@ -40,7 +40,7 @@ def _campaign(folder, name, data, *, seed=5, ess=100, models=("electroadhesion_c
 
 def _spawn(path, *args):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "skinfit.apps.cli", "campaign", str(path), *args],
+    return subprocess.Popen([sys.executable, "-m", "skinfit", "campaign", str(path), *args],
                             start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
 
 

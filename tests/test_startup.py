@@ -27,12 +27,12 @@ def test_import_skinfit_and_the_cli_load_no_arviz_matplotlib_dask_or_jinja2(code
 
 
 def test_fitting_modules_load_no_arviz_plots_matplotlib_or_jinja2():
-    loaded = _loaded("import skinfit.results.fit, skinfit.compare, skinfit.evidence, skinfit.analysis.contrasts, skinfit.analysis.groups")
+    loaded = _loaded("import skinfit.results.fit, skinfit.analysis.compare, skinfit.analysis.evidence, skinfit.analysis.contrasts, skinfit.analysis.groups")
     assert not loaded & {"arviz", "arviz_plots", "matplotlib", "jinja2", "dask", "distributed"}
 
 
 def test_public_names_resolve_lazily_to_the_functions_not_the_submodules():
-    code = ("import skinfit, skinfit.fit, skinfit.compare, skinfit.evidence, types\n"
+    code = ("import skinfit, skinfit.results.fit, skinfit.analysis.compare, skinfit.analysis.evidence, types\n"
             "assert callable(skinfit.fit) and not isinstance(skinfit.fit, types.ModuleType)\n"
             "assert skinfit.fit is sys.modules['skinfit.results.fit'].fit\n"
             "assert skinfit.compare is sys.modules['skinfit.analysis.compare'].compare\n"
@@ -68,7 +68,7 @@ def test_xarray_still_tells_dask_arrays_and_pint_quantities_apart_after_skinfit_
     """Arrays built before dask and pint are imported do not import them; a dask array or pint
     Quantity made afterwards is still one to xarray (lazy, chunked and shown as such; units
     kept and taken off by xarray, not stripped by numpy), and a fit saved then holds the same."""
-    code = ("import numpy as np, skinfit.fit, xarray as xr\n"
+    code = ("import numpy as np, skinfit.results.fit, xarray as xr\n"
             "x = xr.DataArray(np.arange(3.0), dims='i').sum()\n"
             "fit = sys.modules['skinfit.results.fit'].load_fit(sys.argv[1])\n"
             "fit.save(sys.argv[2])\n"

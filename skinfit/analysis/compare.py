@@ -2,35 +2,26 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Sequence
-    from skinfit.results.fit import Fit
-
 import json
 import warnings
-from collections.abc import Mapping
-from pathlib import Path
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+import xarray as xr
+from arviz_stats import loo as az_loo
 
 from skinfit.io.arguments import check_seed
 from skinfit.errors import InputError
-from skinfit.analysis.evidence import METHODS, evidence
-from skinfit.results.fit import as_fits
-from skinfit.analysis.evidence_methods import bayes_factor_strength
+from skinfit.analysis.evidence import METHODS, bayes_factor_strength, evidence
+from skinfit.results.fit import Fit, as_fits
 from skinfit.results.run_labels import run_labels
 
-__all__ = ["compare", "loo", "loo_record", "cli_compare"]
+__all__ = ["compare", "loo", "loo_record"]
 
 
 def loo(fit):
     """PSIS-LOO of a fit (ArviZ); several observables are summed per data row."""
-    import xarray as xr
-    from arviz_stats import loo as az_loo  # ~1-3 s to import: only where LOO is computed
-
     tree = fit.idata
     ll = tree["log_likelihood"].to_dataset()
     names = list(ll.data_vars)
@@ -107,28 +98,3 @@ def compare(fits: Sequence[Fit] | Mapping[str, Fit], *, method: str = "bridge",
                    "p_loo", "pareto_k_gt_0.7", "method", "approximate", "converged"]]
     table.attrs["caveats"] = {label: caveats[label] for label in table.index if label in caveats}
     return table
-
-
-def cli_compare(args):
-    from skinfit.results.fit import load_fit
-
-    paths = [Path(r) / "fit.nc" if Path(r).is_dir() else Path(r) for r in args.runs]
-    fits = [load_fit(p) for p in paths]
-    table = compare(fits, method=args.method)
-    if args.save_evidence:  # keep the evidence with the fit for reports and campaigns (asked for)
-        for f, p in zip(fits, paths):
-            f.save(p)
-    caveats = table.attrs.get("caveats", {})
-    if args.json:
-        records = json.loads(table.reset_index().to_json(orient="records"))
-        for record in records:
-            record["caveat"] = caveats.get(record["model"], "")
-        print(json.dumps(records, indent=2))
-    else:
-        with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
-            print(table.to_string())
-        print("\nlog Z: natural-log evidence +- standard error; log_bf_vs_best = ln(Z/Z_best); "
-              "strength on 2 ln BF (Kass & Raftery 1995); elpd_loo: PSIS-LOO (ArviZ)")
-        for label, text in caveats.items():
-            print(f"{label}: log Z {text}")
-    return 0

@@ -26,7 +26,7 @@ from skinfit.io.arguments import check_number, shown
 from skinfit.errors import InputError, InputTypeError
 from skinfit.results.fit import Fit, _slot_values, as_fit, as_generator
 from skinfit.analysis.groups import load_groups
-from skinfit.analysis.population.population import subject_digest
+from skinfit.analysis.population.inputs import subject_digest
 from skinfit.analysis.population.checks import check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
@@ -45,7 +45,7 @@ def hdi(x, prob):
     """Highest-density interval of 1-D draws ``x``: the narrowest interval between two sorted
     draws holding ``floor(prob * n)`` steps of them, ``(lower, upper)``, as
     ``arviz_stats.hdi(x, prob)`` ("nearest" method) gives it (tests/test_contrasts.py checks
-    that), without importing arviz_stats (~0.5 s) into a report that needs nothing else of it."""
+    that)."""
     x = np.sort(np.asarray(x, dtype=float).ravel())
     if not 0 < prob <= 1 or len(x) == 0:
         raise ValueError(f"expected draws and 0 < prob <= 1 (got {len(x)} draws, prob {prob})")

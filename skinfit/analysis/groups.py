@@ -18,11 +18,6 @@ the order in which the groups are fitted.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from skinfit.results.fit import Fit
-
 import hashlib
 import json
 import os
@@ -35,19 +30,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skinfit.errors import InputError, error_line
+from skinfit.inference.checkpoint import CheckpointLock, load_checkpoint, remove_stale_temps, replace_atomic
 from skinfit.io.arguments import check_input_file, check_path, size_text
 from skinfit.io.data import Dataset, load_dataset
-from skinfit.errors import InputError, error_line
-from skinfit.results.fit import fit, load_fit, resolve_inputs
+from skinfit.io.paths import shipped_root
 from skinfit.io.provenance import input_lines, input_record
+from skinfit.posterior import _level_labels
+from skinfit.results.fit import Fit, fit, load_fit, resolve_inputs
 
-__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
+__all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "inside", "check_out_dir",
            "read_index", "index_document", "read_inputs",
            "record_source", "source_problem", "data_drift", "listed_problem", "reading", "index_drift",
-           "missing_groups"]
-
-#: What an id used as a folder name may look like: a name, never a path (no ``/``, ``..``, ``~``).
-NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+           "missing_groups", "write_json"]
 
 
 def derive_seed(seed, *key):
@@ -77,8 +72,6 @@ def group_labels(dataset, by, where="--by"):
         if c not in frame.columns:
             raise InputError(where, f"no column {c!r} in {dataset.path} (columns: "
                              f"{', '.join(frame.columns)}; declared groups: {', '.join(dataset.groups) or 'none'})")
-    from skinfit.posterior import _level_labels
-
     parts = [[f"{c}={v}" for v in _level_labels(frame, [c], dataset)] for c in by]
     labels = [",".join(t) for t in zip(*parts)]
     return labels, list(dict.fromkeys(labels))
@@ -93,14 +86,6 @@ def group_dir(label):
     """
     slug = re.sub(r"[^A-Za-z0-9._-]", "_", label.replace("=", "-"))[:60].lstrip("._-") or "g"
     return f"{slug}-{hashlib.sha256(label.encode()).hexdigest()[:8]}"
-
-
-def check_name(value, what, where):
-    """``value`` if it is a name fit for a folder (:data:`NAME`), else an InputError."""
-    if not isinstance(value, str) or not NAME.match(value) or value in (".", ".."):
-        raise InputError(where, f"{what} {value!r} cannot name a result folder: expected a name of letters, "
-                         "digits, '.', '_' and '-' starting with a letter or digit (no '/', no '..')")
-    return value
 
 
 def inside(out, path):
@@ -126,8 +111,6 @@ def card_path(dataset):
 
 def _absolute(card):
     """A card path as recorded (a shipped card relative to the shipped folder) made absolute."""
-    from skinfit.io.paths import shipped_root
-
     p, shipped = Path(card), shipped_root()
     return str((p if p.is_absolute() or shipped is None or not (shipped / p).exists() else shipped / p).resolve())
 
@@ -161,8 +144,6 @@ def reading(folder):
     the reader's side of the lock its writer takes (:class:`~skinfit.inference.checkpoint.CheckpointLock`
     ``shared=True`` on ``checkpoint.h5`` and ``campaign``).  A run being written (its index
     listing only the groups done so far) is an InputError naming the writer's pid."""
-    from skinfit.inference.checkpoint import CheckpointLock
-
     folder = Path(folder)
     with CheckpointLock(folder / "checkpoint.h5", shared=True), CheckpointLock(folder / "campaign", shared=True):
         yield
@@ -195,8 +176,6 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
         other columns empty), which the others do not wait for.  When every group fails, the
         first group's exception is raised (after the index lists them all).
     """
-    from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps
-
     from_file = not isinstance(dataset, Dataset)  # else it may be a subset: its hash is not the file's
     dataset = load_dataset(dataset) if from_file else dataset
     model, dataset, priors = resolve_inputs(model, dataset, priors)
@@ -226,7 +205,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
                              progress=progress, ess_target=ess_target, max_steps=max_steps, **fit_options)
             except Exception as exc:  # this group's fit fails alone: listed with its error, the others go on
                 failed.append({"group": label, "rows": len(sub), "seed": group_seed, "error": error_line(exc)})
-                _write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
+                write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
                 first = first or exc
                 continue
             record_source(result, dataset, label, by)
@@ -236,7 +215,7 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
             rows.append({"group": label, "rows": len(sub), "seed": group_seed, "converged": result.converged,
                          "warnings": len(result.warnings), "seconds": round(time.perf_counter() - t0, 3),
                          "path": rel.as_posix()})
-            _write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
+            write_json(out_dir / "index.json", {**header, "groups": rows, "failed": failed})
     if not rows and first is not None:  # every group failed (a bad option fails them all): the first error
         raise first
     table = pd.DataFrame([{**r, "status": "done"} for r in rows] + [
@@ -500,8 +479,6 @@ def check_out_dir(out_dir, model, priors, dataset, by=None, *, overwrite=False, 
 
 def _checkpoint_text(path):
     """How far the checkpoint at ``path`` got, in words (its iteration), or that it is unreadable."""
-    from skinfit.inference.checkpoint import load_checkpoint
-
     try:
         return f"checkpoint.h5 at step {load_checkpoint(path).iteration}"
     except Exception:  # noqa: BLE001 - only said in a message: any unreadable file is just named
@@ -525,8 +502,7 @@ def _inputs_text(keys):
     return " and ".join(parts + (["another grouping"] if "by" in keys else []))
 
 
-def _write_json(path, doc):
-    """Write JSON atomically (temporary file + rename)."""
-    from skinfit.inference.checkpoint import replace_atomic
-
+def write_json(path, doc):
+    """Write JSON atomically (temporary file + rename): an index or record that readers may
+    open at any time."""
     replace_atomic(path, json.dumps(doc, indent=1, default=str).encode())

@@ -21,10 +21,10 @@ parameters and two tests each, the chance that a calibrated pipeline fails somew
 """
 
 import json
-import math
 import multiprocessing
 import threading
 import warnings
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,14 +35,14 @@ from scipy import stats
 from skinfit.io.arguments import check_count, check_memory, check_number, shown
 from skinfit.io.data import Dataset, list_datasets, load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, InputTypeError
-from skinfit.results.fit import check_sizes, default_walkers
+from skinfit.results.fit import _slot_values, check_sizes, default_walkers, fit
 from skinfit.io.models import Model, load_model
 from skinfit.io.outputs import check_outputs
 from skinfit.posterior import Posterior
 from skinfit.io.priors import PriorSet, load_priors
 from skinfit.inference.workers import forkable
 
-__all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "cli_sbc"]
+__all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "markdown_table", "FILES"]
 
 
 @dataclass(frozen=True)
@@ -105,8 +105,6 @@ def _draw_truth(post, rng, batch=64, max_batches=200):
 
 def _slot_draws(fit, names):
     """Posterior draws (n, d) in the order of the sampled slots ``names``."""
-    from skinfit.results.fit import _slot_values
-
     ds = fit.group("posterior")
     slots = {s["name"]: s for s in fit.attr("slots")}
     return np.column_stack([_slot_values(ds, slots[n]) for n in names])
@@ -211,8 +209,6 @@ class _Job:
     seed: int
 
     def __call__(self, item):
-        from skinfit.results.fit import fit
-
         i, ss = item
         rng = np.random.default_rng(ss)
         fit_seed = int(rng.integers(2**63 - 1))
@@ -260,8 +256,6 @@ def _map(job, items, jobs):
                       "from a shell for parallel ones)", UserWarning, stacklevel=3)
         yield from map(job, items)
         return
-    from concurrent.futures import ProcessPoolExecutor
-
     ctx = multiprocessing.get_context("fork")
     with ProcessPoolExecutor(min(jobs, len(items)), mp_context=ctx, initializer=_init_worker,
                              initargs=(job,)) as pool:
@@ -303,39 +297,6 @@ def uniformity(ranks, n_draws, *, alpha=0.01, rng=None):
     return pd.DataFrame.from_dict(rows, orient="index")
 
 
-def plot_ranks(result, path=None):
-    """Rank histograms, one panel per parameter, with the central 99% band of a uniform
-    histogram's bin counts (binomial; Talts et al. 2018, Fig. 3 style)."""
-    from matplotlib.figure import Figure
-
-    names = list(result.ranks.columns)
-    ncol = min(4, len(names))
-    nrow = math.ceil(len(names) / ncol)
-    fig = Figure(figsize=(3.2 * ncol, 2.4 * nrow), layout="constrained")
-    axes = fig.subplots(nrow, ncol, squeeze=False).ravel()
-    n, L = len(result.ranks), result.n_draws
-    b = n_bins(n, L)
-    lo, hi = stats.binom.ppf([0.005, 0.995], n, 1.0 / b)
-    for ax, name in zip(axes, names):
-        counts = np.bincount(result.ranks[name].to_numpy(dtype=int) * b // (L + 1), minlength=b)
-        ax.axhspan(lo, hi, color="0.85", zorder=0)
-        ax.axhline(n / b, color="0.5", lw=0.8)
-        ax.bar(np.arange(b), counts, width=1.0, color="C0", edgecolor="white")
-        row = result.table.loc[name]
-        ax.set_title(f"{name}\np_chi2={row['p_chi2']:.3g}  p_KS={row['p_ks']:.3g}", fontsize=8)
-        ax.set_xticks([0, b - 1], ["0", f"L={L}"])
-        ax.tick_params(labelsize=7)
-    for ax in axes[len(names):]:
-        ax.set_visible(False)
-    fig.suptitle(f"SBC rank histograms: {result.model} on the design of {result.dataset} "
-                 f"({n} simulations; grey: 99% band under uniformity)", fontsize=9)
-    if path is not None:
-        from skinfit.plots.figures import save_figure
-
-        save_figure(fig, path, dpi=110)
-    return fig
-
-
 def markdown_table(result):
     """The per-parameter table as Markdown, with the run's size and verdict."""
     lines = ["| parameter | mean rank (expect {:.1f}) | bins | p chi2 | p KS | pass 1% | pass Bonferroni |".format(
@@ -346,14 +307,15 @@ def markdown_table(result):
     return "\n".join(lines)
 
 
-#: The files :func:`write_sbc` writes.
+#: The files ``skinfit sbc --out`` writes: :func:`write_sbc`'s tables and the rank histograms
+#: (``ranks.png``, :func:`skinfit.plots.sbc.plot_ranks`).
 FILES = ("ranks.csv", "truth.csv", "sbc.csv", "runs.csv", "sbc.json", "sbc.md", "ranks.png")
 
 
 def write_sbc(result, out, *, overwrite=False):
-    """Write ``ranks.csv``, ``truth.csv``, ``sbc.csv`` (tests), ``runs.csv``, ``sbc.md``,
-    ``sbc.json`` and ``ranks.png`` under ``out``; a folder holding an earlier run's files is
-    refused unless ``overwrite``."""
+    """Write ``ranks.csv``, ``truth.csv``, ``sbc.csv`` (tests), ``runs.csv``, ``sbc.md`` and
+    ``sbc.json`` under ``out``; a folder holding an earlier run's files (:data:`FILES`) is
+    refused unless ``overwrite``.  The rank histograms are :func:`skinfit.plots.sbc.plot_ranks`'."""
     check_outputs(out, FILES, command="skinfit sbc", overwrite=overwrite)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -366,21 +328,4 @@ def write_sbc(result, out, *, overwrite=False):
     (out / "sbc.md").write_text(f"# SBC: {result.model} on the design of {result.dataset}\n\n"
                                 f"{len(result.ranks)} simulations, L = {result.n_draws} draws each; "
                                 f"settings {json.dumps(result.settings)}\n\n{markdown_table(result)}\n")
-    plot_ranks(result, out / "ranks.png")
     return out
-
-
-def cli_sbc(args):
-    """``skinfit sbc MODEL [--dataset D] [--n-sims N] [--draws L] [--rows N] [--seed S] [--jobs J]
-    [--out DIR]``."""
-    if args.out:  # an earlier run there: refused before the simulations, unless --overwrite
-        check_outputs(args.out, FILES, command="skinfit sbc", overwrite=args.overwrite)
-    result = run_sbc(args.model, args.dataset, n_sims=args.n_sims, seed=args.seed, n_draws=args.draws,
-                     n_rows=args.rows, ess_target=args.ess, max_steps=args.max_steps, jobs=args.jobs,
-                     progress=print)
-    print(markdown_table(result))
-    print(f"\n{len(result.ranks)} simulations; {'all parameters pass' if result.passed else 'NOT calibrated'} "
-          f"at the {result.settings['alpha']:.0%} level")
-    if args.out:
-        print(f"written: {write_sbc(result, args.out, overwrite=args.overwrite)}")
-    return 0 if result.passed else 1

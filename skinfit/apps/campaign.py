@@ -2,32 +2,9 @@
 
     skinfit campaign CAMPAIGN.toml [--scheduler tcp://HOST:PORT | local] [--workers N]
 
-The campaign file (``campaigns/example.toml`` is a working example)::
-
-    schema_version = 1
-    seed = 20261122                  # the one campaign seed (integer)
-    out = "runs/example"             # result folder, relative to the campaign file
-    models = ["electroadhesion_coulomb", "electroadhesion_empirical"]   # ids or card paths
-    datasets = ["electroadhesion_synthetic"]                            # ids or folder/card paths
-    by = ["voltage"]                 # optional: fit each level of these columns separately
-    scheduler = "local"              # optional: "local" (Dask LocalCluster) or "tcp://HOST:PORT"
-    workers = 2                      # optional: local worker processes (default: CPU count)
-    threads = 1                      # optional: BLAS/OpenMP threads per fit (default: see below)
-
-    [fit]                            # optional options of every fit
-    ess = 200                        # minimum effective sample size (default 400)
-    max_steps = 5000                 # emcee step cap (default 20000)
-    noise = "normal"                 # normal | student_t | lognormal (default: the card's)
-    nwalkers = 32                    # emcee walkers (default: max(32, 4 d))
-
-    [priors]                         # optional: prior file per model (default priors/<model>.toml)
-    electroadhesion_coulomb = "priors/electroadhesion_coulomb.toml"
-
-    [split]                          # optional: per model, parameters split by a column in a fit
-    electroadhesion_empirical = { b = "voltage" }
-
-Paths are relative to the campaign file.  Everything is validated before any fit starts;
-mistakes raise :class:`~skinfit.errors.InputError` naming the file and field.
+The campaign file and what is checked when it is read: :mod:`skinfit.io.campaign_file`.
+Everything is validated before any fit starts; mistakes raise :class:`~skinfit.errors.InputError`
+naming the file and field.
 
 Each fit's seed is :func:`skinfit.analysis.groups.derive_seed` of the campaign seed and the key
 (model id, dataset id, group label), so a fit's samples depend neither on the executor, the
@@ -37,10 +14,9 @@ Results go to ``out/<model>/<dataset>/<group>/fit.nc`` (written atomically by
 written after the result).  Model and dataset ids must be plain names (letters, digits, ``.``,
 ``_``, ``-``; never a path) and unique within the campaign; a group's folder is a slug of its
 label plus a hash of the exact label (:func:`skinfit.analysis.groups.group_dir`); every output path is
-checked to stay under ``out``.  A dataset or model entry that names an existing file is read
-from that file (as an absolute path), whatever its card's id.  Every fit records what it was
-fitted to (its ``source`` attr: the card's absolute path and the sha256 of card and data file;
-its ``group``), as do ``task.json`` and the index.  A fit is complete when the saved result
+checked to stay under ``out``.  Every fit records what it was fitted to (its ``source`` attr:
+the card's absolute path and the sha256 of card and data file; its ``group``), as do
+``task.json`` and the index.  A fit is complete when the saved result
 holds this group of these data (hash), model card and priors (hashes) and seed, and its
 ``task.json`` matches the current specification (options and the sampler's settings,
 :func:`skinfit.inference.sampling.sampler_settings`); a saved fit that does not is reported ("stale")
@@ -79,7 +55,6 @@ import hashlib
 import json
 import os
 import socket
-import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -88,31 +63,26 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import xarray as xr
 
 try:  # Unix only (Windows has none): a worker's peak memory, else not recorded (NaN)
     import resource
 except ImportError:
     resource = None
 
-from skinfit.io.toml import find_file, read_toml, require
 from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from skinfit.io.data import load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, error_line, require_optional
 from skinfit.results.fit import fit
-from skinfit.analysis.groups import (_write_json, check_name, derive_seed, group_dir, group_labels, index_document, inside,
-                     record_source, source_problem)
-from skinfit.io.models import NOISE_MODELS, load_model
-from skinfit.io.priors import load_priors
+from skinfit.analysis.groups import (derive_seed, group_dir, group_labels, index_document, inside, record_source,
+                                     source_problem, write_json)
+from skinfit.io.campaign_file import read_campaign_file
 from skinfit.inference.sampling import sampler_settings
 from skinfit.io.arguments import check_count
 from skinfit.inference.workers import check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
 
-__all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit", "cli_campaign"]
+__all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit"]
 
-_TOP_KEYS = {"schema_version", "seed", "out", "models", "datasets", "by", "scheduler", "workers", "threads",
-             "fit", "priors", "split"}
-_FIT_KEYS = {"ess": (float, "ess_target"), "max_steps": (int, "max_steps"), "noise": (str, "noise"),
-             "nwalkers": (int, "nwalkers")}
 _INDEX_COLUMNS = ["model", "dataset", "group", "seed", "status", "seconds", "converged", "path",
                   "worker", "peak_rss_mb", "threads", "dataset_path", "dataset_sha256"]
 
@@ -130,145 +100,31 @@ class Campaign:
     threads: int | None = None
 
 
-def _resolve(name, base):
-    """A path relative to the campaign file when it names an existing file or folder, else an id."""
-    p = base / name
-    return str(p.resolve()) if p.exists() else name
-
-
-def _card(kind, ref):
-    """The absolute path of the card a reference loads (a path as given, or the shipped id's)."""
-    card = find_file(kind, ref)
-    return str(Path(card).resolve())
-
-
-def _unique_id(seen, obj_id, entry, kind, where, card):
-    """Two entries with one id would share result folders: refuse it, naming both."""
-    if obj_id in seen:
-        first, first_card = seen[obj_id]
-        raise InputError(where, f"{kind} id {obj_id!r} ({card}) is also the id of {first} ({first_card}); "
-                         "two entries with one id would share result folders: give one card another id",
-                         field=entry)
-    seen[obj_id] = (entry, card)
-
-
-def _str_list(doc, key, where, required=True):
-    value = doc.get(key)
-    if value is None and not required:
-        return []
-    if isinstance(value, str) and key == "by":
-        value = [value]
-    if not isinstance(value, list) or not value or not all(isinstance(v, str) for v in value):
-        raise InputError(where, f"expected a non-empty list of strings (got {value!r})", field=key)
-    return value
-
-
 def load_campaign(path):
-    """Read and validate a campaign file; every model, prior and dataset is loaded once here."""
-    path = Path(path)
-    doc, _ = read_toml(path)
-    where = str(path)
-    base = path.resolve().parent
-    unknown = set(doc) - _TOP_KEYS
-    if unknown:
-        raise InputError(where, f"unknown keys {sorted(unknown)} (expected {', '.join(sorted(_TOP_KEYS))})")
-    seed = require(doc, "seed", int, where)
-    if seed < 0:
-        raise InputError(where, f"expected an integer >= 0 (got {seed})", field="seed")
-    out = base / require(doc, "out", str, where)
-    scheduler = check_scheduler(require(doc, "scheduler", str, where, default=None), where, "scheduler",
-                                need_dask=False)
-    workers = check_count(require(doc, "workers", int, where, default=None), where, "workers", optional=True)
-    threads = check_count(require(doc, "threads", int, where, default=None), where, "threads", optional=True)
-    options = {}
-    fit_doc = require(doc, "fit", dict, where, default={})
-    for key, value in fit_doc.items():
-        if key not in _FIT_KEYS:
-            raise InputError(where, f"unknown fit option (expected {', '.join(_FIT_KEYS)})", field=f"fit.{key}")
-        kind, name = _FIT_KEYS[key]
-        value = require(fit_doc, key, kind, where, field_prefix="fit.")
-        if kind is str and value not in NOISE_MODELS:
-            raise InputError(where, f"expected one of {', '.join(NOISE_MODELS)} (got {value!r})", field=f"fit.{key}")
-        if kind is not str and value <= 0:
-            raise InputError(where, f"expected a number > 0 (got {value})", field=f"fit.{key}")
-        options[name] = value
-
-    models, model_cards, seen = {}, {}, {}
-    for i, name in enumerate(_str_list(doc, "models", where)):
-        try:
-            model_cards[name] = _card("models", _resolve(name, base))
-            models[name] = load_model(model_cards[name])
-        except InputError as exc:
-            raise InputError(where, str(exc), field=f"models[{i}]") from None
-        check_name(models[name].id, "model id", f"{where}: models[{i}]")
-        _unique_id(seen, models[name].id, f"models[{i}]", "model", where, model_cards[name])
-    priors_doc = require(doc, "priors", dict, where, default={})
-    split_doc = require(doc, "split", dict, where, default={})
-    for table, key in ((priors_doc, "priors"), (split_doc, "split")):
-        for name in table:
-            if name not in models:
-                raise InputError(where, f"not one of the campaign's models ({', '.join(models)})",
-                                 field=f"{key}.{name}")
-    priors, splits, prior_hashes = {}, {}, {}
-    for name, model in models.items():
-        ref = require(priors_doc, name, str, where, field_prefix="priors.", default=model.id)
-        try:
-            prior_set = load_priors(_resolve(ref, base))
-        except InputError as exc:
-            raise InputError(where, str(exc), field=f"priors.{name}") from None
-        missing = [p for p in model.parameter_names if p not in prior_set]
-        if missing:
-            raise InputError(where, f"prior file {prior_set.path} has no prior for {', '.join(missing)}",
-                             field=f"priors.{name}")
-        priors[name] = str(Path(prior_set.path).resolve()) if Path(prior_set.path).exists() else ref
-        prior_hashes[name] = prior_set.sha256
-        split = require(split_doc, name, dict, where, field_prefix="split.", default={})
-        for param, cols in split.items():
-            if param not in model.parameter_names:
-                raise InputError(where, f"model {model.id!r} has no parameter {param!r} (parameters: "
-                                 f"{', '.join(model.parameter_names)})", field=f"split.{name}.{param}")
-            if not (isinstance(cols, str) or (isinstance(cols, list) and cols and all(isinstance(c, str) for c in cols))):
-                raise InputError(where, f"expected a column name or a list of them (got {cols!r})",
-                                 field=f"split.{name}.{param}")
-        splits[name] = split or None
-
-    by = _str_list(doc, "by", where, required=False)
-    tasks, sampler, seen = [], sampler_settings(), {}
-    for i, name in enumerate(_str_list(doc, "datasets", where)):
-        try:
-            # the card actually read, as an absolute path: a path entry whose card id equals a
-            # shipped dataset's is fitted from that path, never from the shipped folder
-            ref = _card("datasets", _resolve(name, base))
-            dataset = load_dataset(ref)
-        except InputError as exc:
-            raise InputError(where, str(exc), field=f"datasets[{i}]") from None
-        check_name(dataset.id, "dataset id", f"{where}: datasets[{i}]")
-        _unique_id(seen, dataset.id, f"datasets[{i}]", "dataset", where, ref)
-        for c in by:
-            if c not in dataset.frame.columns:
-                raise InputError(where, f"dataset {dataset.id!r} has no column {c!r} (columns: "
-                                 f"{', '.join(dataset.frame.columns)})", field="by")
-        levels = group_labels(dataset, by)[1] if by else [""]
-        for mname, model in models.items():
-            for split_cols in (splits[mname] or {}).values():
-                for c in [split_cols] if isinstance(split_cols, str) else split_cols:
-                    if c not in dataset.frame.columns:
-                        raise InputError(where, f"dataset {dataset.id!r} has no column {c!r}",
-                                         field=f"split.{mname}")
+    """Read and validate a campaign file (:func:`skinfit.io.campaign_file.read_campaign_file`) into
+    its fits; every model, prior and dataset is loaded once here."""
+    spec = read_campaign_file(path)
+    scheduler = check_scheduler(spec.scheduler, spec.path, "scheduler", need_dask=False)
+    tasks, sampler, out = [], sampler_settings(), spec.out
+    for entry in spec.datasets:
+        dataset, ref = entry.dataset, entry.card
+        levels = group_labels(dataset, spec.by)[1] if spec.by else [""]
+        for m in spec.models:
+            model = m.model
             for label in levels:
                 rel = Path(model.id) / dataset.id / (group_dir(label) if label else "all") / "fit.nc"
-                tasks.append({"model": model.id, "model_ref": model_cards[mname], "dataset": dataset.id,
-                              "dataset_ref": ref, "by": by, "group": label,
-                              "seed": derive_seed(seed, model.id, dataset.id, label),
-                              "priors": priors[mname], "split": splits[mname], "options": options,
+                tasks.append({"model": model.id, "model_ref": m.card, "dataset": dataset.id,
+                              "dataset_ref": ref, "by": list(spec.by), "group": label,
+                              "seed": derive_seed(spec.seed, model.id, dataset.id, label),
+                              "priors": m.priors, "split": m.split, "options": spec.options,
                               # an edited card, prior file or data file, or another sampler,
                               # makes the fit run again
-                              "sha256": {"model": model.sha256, "priors": prior_hashes[mname],
+                              "sha256": {"model": model.sha256, "priors": m.priors_sha256,
                                          "dataset": dataset.sha256},
                               "sampler": sampler,
                               "path": str(inside(out, out / rel))})
-    return Campaign(path=where, seed=seed, out=out, tasks=tuple(tasks), scheduler=scheduler, workers=workers,
-                    threads=threads)
+    return Campaign(path=spec.path, seed=spec.seed, out=out, tasks=tuple(tasks), scheduler=scheduler,
+                    workers=spec.workers, threads=spec.threads)
 
 
 def _spec(task):
@@ -312,7 +168,7 @@ def _run_fit(task, threads):
     record = {"status": "done", "seconds": round(time.perf_counter() - t0, 3), "converged": result.converged,
               "worker": f"{socket.gethostname()}:{os.getpid()}", "peak_rss_mb": _peak_rss_mb(),
               "threads": threads_used}
-    _write_json(path.parent / "task.json", {"spec": json.loads(_spec(task)), **record})
+    write_json(path.parent / "task.json", {"spec": json.loads(_spec(task)), **record})
     return record
 
 
@@ -326,14 +182,12 @@ def _peak_rss_mb():
 def _completed(task):
     """``(record, problem)``: the saved record of a complete fit with this specification (else
     None), and why a fit found in the task's folder is not reused (else None)."""
-    import arviz as az
-
     path = Path(task["path"])
     record_path = path.parent / "task.json"
     if not path.exists():
         return None, None
     try:
-        tree = az.from_netcdf(path)
+        tree = xr.open_datatree(path)
         attrs = dict(tree.attrs)
         tree.close()
     except (OSError, ValueError) as exc:
@@ -478,7 +332,8 @@ def _run_locked(campaign, scheduler, workers, threads, echo):
 
 
 def _run_dask(campaign, todo, scheduler, workers, threads, finish):
-    distributed = require_optional("distributed", "dask")  # checked before the run (check_scheduler)
+    # the optional dask extra, imported only for a Dask executor (checked before the run: check_scheduler)
+    distributed = require_optional("distributed", "dask")
     Client, LocalCluster, dask_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
 
     cluster = None
@@ -515,7 +370,7 @@ def _write_text(path, text):
 
 def _write_index(out, rows):
     table = pd.DataFrame(rows, columns=_INDEX_COLUMNS)
-    _write_json(out / "index.json", rows)
+    write_json(out / "index.json", rows)
     _write_text(out / "index.csv", table.to_csv(index=False))
 
 
@@ -525,25 +380,3 @@ def _key(task):
 
 def _now():
     return time.strftime("%Y-%m-%dT%H:%M:%S")
-
-
-def cli_campaign(args):
-    """``skinfit campaign``: run a campaign file and print its index."""
-    t0 = time.perf_counter()
-    check_scheduler(args.scheduler)  # before the campaign's cards and data are read
-    campaign = load_campaign(args.campaign)
-    as_json = getattr(args, "json", False)
-    echo = (lambda *a, **k: print(*a, **k, file=sys.stderr)) if as_json else print
-    table = run_campaign(campaign, scheduler=args.scheduler, workers=args.workers,
-                         threads=getattr(args, "threads", None), echo=echo)
-    failed = ~table["status"].isin(["done", "complete"])
-    if as_json:
-        print(json.dumps({"index": str(campaign.out / "index.csv"), "failed": int(failed.sum()),
-                          "fits": json.loads(table.to_json(orient="records"))}, indent=2))
-        return 1 if failed.any() else 0
-    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
-        print(table.drop(columns=["path", "worker", "threads", "dataset_path", "dataset_sha256"]).to_string(index=False))
-    unconverged = sum(c is False for c in table["converged"])
-    print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
-          f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")
-    return 1 if failed.any() else 0

@@ -11,7 +11,6 @@ this process compares the fits and runs the population; the report then copies t
 
 import json
 import os
-import sys
 import time
 import zlib
 from collections import Counter
@@ -21,8 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
-from skinfit.io.arguments import check_count, check_output_folder
+from skinfit.analysis.compare import compare, loo_record
+from skinfit.analysis.evidence import evidence
 from skinfit.errors import InputError
+from skinfit.inference.sampling import sampler_settings
+from skinfit.inference.workers import limited_threads
+from skinfit.io.arguments import check_count, check_output_folder
+from skinfit.io.data import list_datasets, load_dataset
+from skinfit.io.models import load_model
+from skinfit.io.paths import explicit_search_path, set_search_path
+from skinfit.io.priors import load_priors
+from skinfit.report.groups import group_analyses
+from skinfit.report.html import claim_report_folder, store_fit_figures, write_report
+from skinfit.results.fit import fit, load_fit
 
 __all__ = ["DEMO_OPTIONS", "demo_plan", "run_demo"]
 
@@ -43,9 +53,6 @@ DEMO_OPTIONS = {
 
 def demo_plan(seed):
     """The (dataset, model, seed, options) fits of the demo, in a stable order."""
-    from skinfit.io.data import list_datasets, load_dataset
-    from skinfit.io.models import load_model
-
     plan = []
     for ds_id in list_datasets():
         ds = load_dataset(ds_id)
@@ -82,9 +89,6 @@ def _inputs(data, model_id):
     """The sha256 of a plan item's data (its selected rows), model card and prior file, as
     this process finds them: a saved fit is reused, and a worker's fit kept, only when made
     from these."""
-    from skinfit.io.models import load_model
-    from skinfit.io.priors import load_priors
-
     # the prior file's identity: its distributions are checked where it is used (the fit), so
     # that a demo whose fits are all reused does not import scipy.stats for them
     return {"dataset": data.sha256, "model": load_model(model_id).sha256,
@@ -113,16 +117,11 @@ def _run_one(item, path):
     level: runs in a worker process, so these costs are spread over the workers too), with
     one BLAS/OpenMP thread unless the environment sets otherwise (one worker per core:
     :func:`skinfit.inference.workers.worker_threads`)."""
-    from skinfit.inference.workers import limited_threads
-
     with limited_threads():
         return _fit_one(item, path)
 
 
 def _fit_one(item, path):
-    from skinfit.io.data import load_dataset
-    from skinfit.results.fit import fit
-
     t0 = time.perf_counter()
     ds = _select(load_dataset(item["dataset"]), item["rows"])
     found = _inputs(ds, item["model"])
@@ -141,9 +140,6 @@ def _fit_one(item, path):
 
 def _comparison_records(fit):
     """Evidence and LOO of ``fit`` into its attributes; True when either was computed now."""
-    from skinfit.analysis.compare import loo_record
-    from skinfit.analysis.evidence import evidence
-
     had = bool(json.loads(fit.attrs.get("evidence", "{}")).get("bridge")) and "loo" in fit.attrs
     evidence(fit)
     loo_record(fit)
@@ -156,9 +152,6 @@ def _reuse(path, item):
     None (an edited file, or another sampler, and the item is fitted again)."""
     if not path.exists():
         return None
-    from skinfit.results.fit import load_fit
-    from skinfit.inference.sampling import sampler_settings
-
     try:
         saved = load_fit(path)
         attrs = saved.attrs
@@ -172,10 +165,6 @@ def _reuse(path, item):
 
 def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, datasets=None, echo=print):
     """Fit, compare and report every shipped dataset; returns the report's index.html path."""
-    from skinfit.results.fit import load_fit
-    from skinfit.io.paths import explicit_search_path, set_search_path
-    from skinfit.report.html import claim_report_folder, write_report
-
     out = check_output_folder(out, "demo", "out")
     report = check_output_folder(report, "demo", "report")
     seed = check_count(seed, "demo", "seed", lo=0, hi=2**63 - 1)
@@ -235,8 +224,6 @@ def _draw_one(path, n_of_model):
     """A new fit's report figures into the figure store (top level: runs in a fit worker); a
     figure that fails is left for the report, which draws it again and lists the error."""
     os.environ.setdefault("MPLBACKEND", "Agg")
-    from skinfit.report.html import store_fit_figures
-
     return store_fit_figures(path, n_of_model)
 
 
@@ -244,8 +231,6 @@ def _analyses(fits, plan, out, seed, echo):
     """The comparison tables of each dataset's competing models, the populations and the
     contrasts of the demo's fits (each population kept under ``out``, with the fits it is
     drawn from, whichever report folder shows it)."""
-    from skinfit.analysis.compare import compare
-
     comparisons, computed = {}, set()
     for ds_id in dict.fromkeys(p["dataset"] for p in plan):
         items = [(name, f, p) for (name, f), p in zip(fits.items(), plan)
@@ -259,18 +244,9 @@ def _analyses(fits, plan, out, seed, echo):
     for (name, f), p in zip(fits.items(), plan):
         if name in computed or not f.summary_stored:  # saved by an older demo: keep what it lacked with it
             f.save(_path(out, p))
-    from skinfit.report.groups import group_analyses
-
     t0 = time.perf_counter()
     populations, contrasts = group_analyses(fits, seed=seed, echo=echo, cache_dir=Path(out) / ".cache")
     if populations or contrasts:
         echo(f"\npopulation of {', '.join(populations) or 'none'} and {len(contrasts)} contrast table(s): "
              f"{time.perf_counter() - t0:.1f} s")
     return comparisons, populations, contrasts
-
-
-def cli_demo(args):
-    run_demo(args.out, args.report or str(Path(args.out) / "report"), seed=args.seed, jobs=args.jobs,
-             datasets=args.dataset)
-    sys.stdout.flush()
-    return 0

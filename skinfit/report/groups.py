@@ -309,7 +309,7 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
             continue
         if len(group) < min_fits:
             continue
-        from skinfit.analysis.population.population import subject_digest
+        from skinfit.analysis.population.inputs import subject_digest
 
         digests = sorted(subject_digest(f) for f in group.values())
         mine = [r for r in saved if r.model_id == model_id]

@@ -845,7 +845,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
         from markupsafe import Markup
 
-        from skinfit.analysis.design import design_section_html
+        from skinfit.report.design import design_section_html
 
         design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id, "issues": design_issues(d),
                             "html": Markup(design_section_html(d, figdir))} for d in designs]
@@ -1002,7 +1002,7 @@ def _across_fits(items, figdir, population, populations, out_dir, jobs):
         pop_result = populations.get(model_id)
         pop_info = population_section(pop_result) if pop_result is not None else None
         if pop_info is not None:
-            from skinfit.analysis.population.population import DERIVED
+            from skinfit.analysis.population.result import DERIVED
 
             pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
             if pop_info["effects"] is not None:
@@ -1176,7 +1176,7 @@ def _saved_populations(paths):
     out = []
     for p in dict.fromkeys(Path(p) / "population" / "population.nc" for p in paths):
         if p.is_file():
-            from skinfit.analysis.population.population import load_population  # only then: it imports scipy.stats
+            from skinfit.analysis.population.result import load_population  # only then: it imports scipy.stats
 
             try:
                 out.append(load_population(p))

@@ -22,6 +22,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
 from skinfit.errors import InputError
 from skinfit.analysis.groups import data_drift
@@ -164,8 +165,6 @@ def check_subjects(fits, digests):
 
 def _hyper_prior_log_sd_interval(scale, nu=2.0):
     """90% central interval of a half-t(nu, scale) sd (the hyper-prior of a population sd)."""
-    from scipy import stats
-
     return tuple(float(scale * stats.t.ppf(0.5 + q / 2, nu)) for q in (0.05, 0.95))
 
 

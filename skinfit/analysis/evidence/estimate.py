@@ -1,6 +1,6 @@
 """``skinfit.evidence``: the log marginal likelihood of a fit, with an honest error.
 
-Wires the model-agnostic estimators of :mod:`skinfit.analysis.evidence_methods` to a fit's own
+Wires the model-agnostic estimators of :mod:`skinfit.analysis.evidence` to a fit's own
 posterior: the log-target is the fit's normalised log posterior in its sampling coordinates
 (likelihood with all its constants, priors renormalised over their bounds, Jacobian of the
 coordinate map), so numbers from different models on the same data are comparable.
@@ -9,26 +9,29 @@ Results are cached in the fit's attributes (``attrs["evidence"]``) and saved wit
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from skinfit.results.fit import Fit
-
 import inspect
 import json
 import time
 
 import numpy as np
 
-from skinfit.io.arguments import check_count, check_flag, check_seed
 from skinfit.errors import InputError
-from skinfit.analysis.evidence_methods import LaplaceError, LogEvidence, bridge_sampling, laplace, nested
-from skinfit.results.fit import as_fit, as_generator
+from skinfit.io.arguments import check_count, check_flag, check_seed
+from skinfit.results.fit import Fit, as_fit, as_generator
+from skinfit.analysis.evidence.log_evidence import LogEvidence
+from skinfit.analysis.evidence.bridge import bridge_sampling
+from skinfit.analysis.evidence.laplace import LaplaceError, laplace
+from skinfit.analysis.evidence.nested import nested
 
 __all__ = ["evidence", "posterior_draws", "METHODS"]
 
+
 METHODS = ("bridge", "laplace", "nested")
+
+
 _ESTIMATORS = {"bridge": bridge_sampling, "laplace": laplace}
+
+
 #: Most repeats of one estimate (each is a whole estimate; their spread is the error's check).
 MAX_REPEATS = 10_000
 
@@ -51,7 +54,7 @@ def evidence(fit: Fit, method: str = "bridge", *, rng: int | np.random.Generator
              n_repeats: int = 1, refresh: bool = False, **options) -> LogEvidence:
     """log Z of ``fit`` by ``method`` ("bridge" default, "laplace", "nested").
 
-    Returns a :class:`~skinfit.analysis.evidence_methods.LogEvidence` (``log_z``, ``se``, ``caveat``, ...).
+    Returns a :class:`~skinfit.analysis.evidence.LogEvidence` (``log_z``, ``se``, ``caveat``, ...).
     ``n_repeats`` > 1 repeats the estimate with fresh random splits and reports the spread.
     The result is stored in ``fit.attrs["evidence"]`` (save the fit to keep it).
 

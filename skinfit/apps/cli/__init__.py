@@ -1,121 +1,25 @@
-"""The ``skinfit`` command line: a thin layer over the library."""
+"""The ``skinfit`` command line: a thin layer over the library.
+
+This package holds the parser and the dispatch; each command is a module of it (``fit``,
+``compare``, ``design``, ...) with a ``run(args)`` that calls the library and prints.  A
+command's module is imported only when that command runs, so that ``skinfit --help`` and
+``skinfit models`` start without numpy, pandas or ArviZ (tests/test_startup.py).
+"""
 
 import argparse
-import json
+import importlib
 import os
 import sys
-import time
 import warnings
 from pathlib import Path
 
-from skinfit.io.arguments import check_output_folder
+from skinfit import __version__
+from skinfit.apps.cli.listing import NothingFound
 from skinfit.errors import InputError, MissingDependency
+from skinfit.io.arguments import check_output_folder
+from skinfit.io.paths import check_search_path, explicit_search_path, set_search_path
 
-__all__ = ["main"]
-
-
-def _where(kind, args):
-    """Search-path entries of ``kind`` (id -> Entry); none found: say where it looked, exit 1."""
-    from skinfit.io.paths import entries, search_path
-
-    found = entries(kind)
-    if not found:
-        looked = "\n".join(f"  {r.path / kind}  ({r.origin})" for r in search_path())
-        raise _NothingFound(f"skinfit: no {kind} found; searched:\n{looked}\n"
-                            f"(add folders with --path DIR or ${'SKINFIT_PATH'}; see `skinfit --help`)")
-    if getattr(args, "verbose", False) and not args.json:
-        print("search path (first match wins):")
-        for r in search_path():
-            print(f"  {r.path / kind}  ({r.origin})")
-        print()
-    return found
-
-
-def _origin(entry):
-    return {"path": str(entry.path), "origin": entry.root.origin,
-            "shadows": [str(r.path) for r in entry.shadows]}
-
-
-def _from_line(row, args):
-    if not getattr(args, "verbose", False):
-        return ""
-    shadow = f"; shadows {', '.join(row['shadows'])}" if row["shadows"] else ""
-    return f"\n  from: {row['path']} ({row['origin']}{shadow})"
-
-
-class _NothingFound(Exception):
-    """A listing command found nothing: message printed, exit status 1."""
-
-
-def _cmd_models(args):
-    from skinfit.io.models import load_model
-    from skinfit.io.references import cite
-
-    rows = []
-    for mid, entry in _where("models", args).items():
-        m = load_model(str(entry.path))
-        rows.append({"id": m.id, **_origin(entry), "title": m.title, "source": m.source, "cited": cite(m.source),
-                     "observables": [f"{o.name} [{o.unit}]" for o in m.observables],
-                     "covariates": [f"{c.name} [{c.unit}]" for c in m.covariates],
-                     "parameters": [f"{p.name} [{p.unit}]" for p in m.parameters],
-                     "variants": list(m.variants)})
-    if args.json:
-        return print(json.dumps(rows, indent=2))
-    for r in rows:
-        print(f"{r['id']}: {r['title']}{_from_line(r, args)}\n  source: {r['cited']}"
-              f"\n  observes: {', '.join(r['observables'])}"
-              f"\n  covariates: {', '.join(r['covariates'])}\n  parameters: {', '.join(r['parameters'])}"
-              + (f"\n  competes with: {', '.join(r['variants'])}" if r["variants"] else "") + "\n")
-
-
-def _cmd_priors(args):
-    from skinfit.io.models import load_model
-    from skinfit.io.priors import load_priors
-
-    if args.model is None:  # list the prior files on the search path
-        rows = [{"id": pid, **_origin(e), "model": load_priors(str(e.path)).model}
-                for pid, e in _where("priors", args).items()]
-        if args.json:
-            return print(json.dumps(rows, indent=2))
-        for r in rows:
-            print(f"{r['id']} (for model {r['model']}){_from_line(r, args)}")
-        return 0
-    priors = load_priors(args.model)
-    units = {}
-    try:
-        m = load_model(priors.model)
-        units = {p.name: p.unit for p in m.parameters}
-    except InputError:
-        pass
-    from skinfit.io.references import cite
-
-    noise_unit = {n: "1 (Student-t degrees of freedom)" if n == "nu" or n.startswith("nu_") else "(noise, observable's unit)"
-                  for n in priors.priors}
-    rows = [{"parameter": n, "unit": units.get(n, noise_unit[n]), "prior": p.describe(),
-             "source": p.source, "cited": cite(p.source)} for n, p in priors.priors.items()]
-    if args.json:
-        return print(json.dumps(rows, indent=2))
-    print(f"priors for {priors.model} ({priors.path}), SI units, each truncated to its bounds:\n")
-    for r in rows:
-        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['cited']}")
-
-
-def _cmd_datasets(args):
-    from skinfit.io.data import load_dataset
-
-    rows = []
-    for did, entry in _where("datasets", args).items():
-        ds = load_dataset(str(entry.path.parent))
-        rows.append({"id": ds.id, **_origin(entry), "title": ds.title, "rows": len(ds), "model": ds.model,
-                     "provenance": ds.provenance.get("kind"), "groups": list(ds.groups),
-                     "columns": {c.name: c.unit or "category" for c in ds.columns}})
-    if args.json:
-        return print(json.dumps(rows, indent=2))
-    for r in rows:
-        cols = ", ".join(f"{k} [{v}]" for k, v in r["columns"].items())
-        print(f"{r['id']} ({r['provenance']}, {r['rows']} rows, for {r['model']}): {r['title']}"
-              f"{_from_line(r, args)}\n"
-              f"  columns (units as stored; converted to SI on load): {cols}\n")
+__all__ = ["main", "build_parser", "one_line"]
 
 
 def _int_in(lo, hi, what):
@@ -149,107 +53,6 @@ _SEED = _int_in(0, 2**63 - 1, "a seed, an integer 0 .. 2**63-1")
 _COUNT = _int_in(1, 10**9, "a whole number >= 1")
 
 
-def _parse_split(items):
-    out = {}
-    for item in items or []:
-        name, sep, cols = item.partition("=")
-        if not sep or not cols:
-            raise InputError("--split", f"expected PARAMETER=COLUMN[,COLUMN] (got {item!r})")
-        out[name] = cols.split(",")
-    return out
-
-
-def _cmd_fit(args):
-    from skinfit.results.fit import fit, resolve_inputs
-
-    out = Path(args.out)
-    split = _parse_split(args.split) or None
-    if args.by:
-        from skinfit.analysis.groups import fit_by
-
-        if args.resume:
-            raise InputError("--resume", "not supported with --by yet: resume each group's run directory")
-
-        dataset = _cardless_csv(args)
-        index = fit_by(args.model, dataset or args.dataset, args.by, out, priors=args.priors, seed=args.seed,
-                       split=split, noise=args.noise, progress=not args.quiet,
-                       ess_target=args.ess, max_steps=args.max_steps, overwrite=args.overwrite,
-                       writes_card=dataset is not None)
-        if dataset is not None:  # a CSV without a card: its card and a copy beside the results
-            from skinfit.io.data import write_card
-
-            print(f"dataset card: {write_card(dataset, out / 'dataset')}", file=sys.stderr if args.json else sys.stdout)
-        if args.json:
-            print(index.to_json(orient="records", indent=2))
-        else:
-            from skinfit.analysis.groups import read_inputs
-
-            print("\n".join(read_inputs(out)) + "\n")  # the files every group's fit read
-            print(index.to_string(index=False) + f"\n\nwritten: {out / 'index.json'}")
-        failed = int((index["status"] != "done").sum())
-        if failed:  # as a campaign: the other groups' results kept, exit 1
-            print(f"skinfit: {failed} of {len(index)} group fit(s) failed, see above", file=sys.stderr)
-            return 1
-        warned = int((~index["converged"].astype(bool) | (index["warnings"] > 0)).sum())
-        if args.strict and warned:  # as for a single fit: results kept, exit 3
-            print(f"skinfit: --strict: {warned} group problem(s) (not converged or warned), see above",
-                  file=sys.stderr)
-            return 3
-        return 0
-    from skinfit.inference.checkpoint import CheckpointLock
-    from skinfit.analysis.groups import check_out_dir
-
-    t0 = time.perf_counter()
-    checkpoint = out / "checkpoint.h5"
-    dataset = _cardless_csv(args)
-    model, data, priors = resolve_inputs(args.model, dataset or args.dataset, args.priors)
-    # results there are replaced only when asked (--overwrite), or continued (--resume)
-    claim = dict(overwrite=args.overwrite, resume=args.resume, writes_card=dataset is not None)
-    check_out_dir(out, model, priors, data, **claim)
-    if args.resume and not checkpoint.exists():
-        print(f"skinfit: no checkpoint {checkpoint} to resume: starting afresh", file=sys.stderr)
-    with CheckpointLock(checkpoint):
-        check_out_dir(out, model, priors, data, **claim)  # again, holding the lock: a run that ended meanwhile
-        result = fit(model, data, priors=priors, rng=args.seed, split=split,
-                     noise=args.noise, progress=not args.quiet,
-                     ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
-                     resume=args.resume, checkpoint_every=args.checkpoint_every)
-        path = result.save(out / "fit.nc")  # still holding the lock: no other run sees the folder half written
-        summary = result.summary()
-        (out / "summary.csv").write_text(summary.to_csv())
-        card = None
-        if dataset is not None:  # a CSV without a card: its card and a copy beside the result
-            from skinfit.io.data import write_card
-
-            card = write_card(dataset, out / "dataset")
-    if args.json:
-        print(json.dumps({"fit": str(path), "summary_csv": str(out / "summary.csv"), "model": result.model_id,
-                          "dataset": result.dataset_id, "dataset_card": None if card is None else str(card),
-                          "inputs": result.inputs,
-                          "seed": int(result.attrs["seed"]),
-                          "converged": bool(result.converged), "warnings": result.warnings, "notes": result.notes,
-                          "summary": json.loads(summary.to_json(orient="index")),
-                          "seconds": time.perf_counter() - t0}, indent=2, default=str))
-    else:
-        print(result.report_text(summary))
-        if card is not None:
-            print(f"dataset card (rerun with it: skinfit fit {args.model} {out / 'dataset'}): {card}")
-        print(f"\nwritten: {path} and {out / 'summary.csv'}  ({time.perf_counter() - t0:.1f} s)")
-    if args.strict and result.warnings:  # failed or warned (skinfit.inference.guardrails): result kept, exit 3
-        print(f"skinfit: --strict: {len(result.warnings)} guard-rail problem(s), see above", file=sys.stderr)
-        return 3
-    return 0
-
-
-def _cardless_csv(args):
-    """The Dataset of a CSV named without a card (units in its header), else None."""
-    if Path(args.dataset).suffix.lower() not in (".csv", ".txt"):
-        return None
-    from skinfit.io.data import load_dataset
-
-    return load_dataset(args.dataset, model=args.model)
-
-
 def one_line(message):
     """``message`` as one printable line: characters that break a line (also for
     ``str.splitlines``: \\x1c-\\x1e, \\x85, \\u2028...) or are invisible (bidi controls) are
@@ -279,21 +82,21 @@ class _Parser(argparse.ArgumentParser):
         super().error(one_line(message))
 
 
-def _lazy(module, function):
-    """A command implemented in another module, imported only when it runs."""
+def _command(module, function="run"):
+    """The function that runs a command: ``function`` of ``module``, imported when the command
+    runs (the one import inside a function here: start-up, see the module's docstring)."""
 
     def run(args):
-        import importlib
-
         return getattr(importlib.import_module(module), function)(args)
 
     return run
 
 
 def build_parser():
+    """The parser of ``skinfit`` and its commands (``skinfit --help``)."""
     p = _Parser(prog="skinfit", description="Bayesian inference for published "
                 "skin-friction models: MAP (nlopt) + emcee, results as ArviZ trees.")
-    p.add_argument("--version", action="version", version=f"skinfit {_version()}")
+    p.add_argument("--version", action="version", version=f"skinfit {__version__}")
     p.add_argument("--path", action="append", metavar="DIR", default=[],
                    help="folder with models/, priors/, datasets/ searched first (repeatable); then "
                         "$SKINFIT_PATH, the user folder, the shipped files (see `skinfit models --verbose`)")
@@ -301,16 +104,16 @@ def build_parser():
     s = sub.add_parser("models", help="list the model cards (models/*.toml) with units and sources")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each card is from")
-    s.set_defaults(func=_cmd_models)
+    s.set_defaults(func=_command("skinfit.apps.cli.models"))
     s = sub.add_parser("priors", help="show a model's priors with their literature sources (no MODEL: list prior files)")
     s.add_argument("model", nargs="?", help="model id or path of a prior file")
     s.add_argument("--json", action="store_true")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each file is from")
-    s.set_defaults(func=_cmd_priors)
+    s.set_defaults(func=_command("skinfit.apps.cli.priors"))
     s = sub.add_parser("datasets", help="list the datasets on the search path (datasets/*/dataset.toml)")
     s.add_argument("--json", action="store_true")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each dataset is from")
-    s.set_defaults(func=_cmd_datasets)
+    s.set_defaults(func=_command("skinfit.apps.cli.datasets"))
     s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
     s.add_argument("model", help="model id (models/<id>.toml) or path")
     s.add_argument("dataset", help="dataset id (datasets/<id>/), its folder or card, or a CSV file with units "
@@ -335,7 +138,7 @@ def build_parser():
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.add_argument("--json", action="store_true", help="print the result as JSON (summary, seed, warnings)")
-    s.set_defaults(func=_cmd_fit)
+    s.set_defaults(func=_command("skinfit.apps.cli.fit"))
     s = sub.add_parser("compare", help="rank fits of the same data by evidence (log Z, Bayes factors) and LOO")
     s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
     s.add_argument("--method", default="bridge", choices=["bridge", "laplace", "nested"],
@@ -343,14 +146,14 @@ def build_parser():
     s.add_argument("--save-evidence", action="store_true",
                    help="store the evidence in each input fit file (rewrites them; default: inputs untouched)")
     s.add_argument("--json", action="store_true")
-    s.set_defaults(func=_lazy("skinfit.analysis.compare", "cli_compare"))
+    s.set_defaults(func=_command("skinfit.apps.cli.compare"))
     s = sub.add_parser("report", help="write a self-contained static HTML report of fits")
     s.add_argument("runs", nargs="+", help="run directories or fit.nc files, and folders written by `skinfit design --out` "
                    "(a section each); a run's population saved by `skinfit population RUN` is shown when made from "
                    "the same fits (else one is computed with the defaults, and the report says so)")
     s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
     s.add_argument("--json", action="store_true", help="print the report's path and fits as JSON")
-    s.set_defaults(func=_lazy("skinfit.report.html", "cli_report"))
+    s.set_defaults(func=_command("skinfit.report.html", "cli_report"))
     s = sub.add_parser("campaign", help="run a (models x datasets x groups) matrix of fits")
     s.add_argument("campaign", help="campaign TOML file")
     s.add_argument("--scheduler", help="Dask scheduler: tcp://HOST:PORT, or 'local' for a LocalCluster")
@@ -358,7 +161,7 @@ def build_parser():
     s.add_argument("--threads", type=_COUNT, default=None, help="BLAS/OpenMP threads per fit (default 1, "
                    "unless OMP_NUM_THREADS or the like is set)")
     s.add_argument("--json", action="store_true", help="print the index as JSON (progress goes to stderr)")
-    s.set_defaults(func=_lazy("skinfit.apps.campaign", "cli_campaign"))
+    s.set_defaults(func=_command("skinfit.apps.cli.campaign"))
     s = sub.add_parser("population", help="population distribution over per-subject fits (a --by run or a campaign)")
     s.add_argument("run", help="run directory of `skinfit fit --by` or a campaign out directory (index.json)")
     s.add_argument("--params", action="append", metavar="NAME[,NAME]", help="population parameters (default: "
@@ -374,7 +177,7 @@ def build_parser():
     s.add_argument("--out", help="output directory (default RUN/population)")
     s.add_argument("--overwrite", action="store_true", help="replace a population already in --out")
     s.add_argument("--strict", action="store_true", help="exit 3 if not converged or the sampler warned")
-    s.set_defaults(func=_lazy("skinfit.analysis.population.population", "cli_population"))
+    s.set_defaults(func=_command("skinfit.apps.cli.population"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")
     s.add_argument("--dataset", help="shipped dataset whose design is simulated on (default: the model's)")
@@ -387,14 +190,14 @@ def build_parser():
     s.add_argument("--seed", type=_SEED, default=0)
     s.add_argument("--out", default=None, help="directory for the rank table and histogram")
     s.add_argument("--overwrite", action="store_true", help="replace the SBC results already in --out")
-    s.set_defaults(func=_lazy("skinfit.analysis.sbc", "cli_sbc"))
+    s.set_defaults(func=_command("skinfit.apps.cli.sbc"))
     s = sub.add_parser("demo", help="fit every shipped dataset with its model and variants, compare, report")
     s.add_argument("--out", default="runs/demo", help="where the fits go (default runs/demo)")
     s.add_argument("--report", help="report directory (default OUT/report)")
     s.add_argument("--seed", type=_SEED, default=1, help="demo seed; each fit's seed derives from it")
     s.add_argument("--jobs", type=_COUNT, help="parallel fits (default: one per core)")
     s.add_argument("--dataset", action="append", help="only this shipped dataset (repeatable)")
-    s.set_defaults(func=_lazy("skinfit.apps.demo", "cli_demo"))
+    s.set_defaults(func=_command("skinfit.apps.cli.demo"))
     s = sub.add_parser("design", help="which measurements next: rank candidate conditions by expected "
                                       "information gain and propose a plan")
     s.add_argument("model", help="model id (models/<id>.toml)")
@@ -410,14 +213,8 @@ def build_parser():
     s.add_argument("--seed", type=_SEED, default=0, help="seed of every Monte Carlo draw (recorded; default 0)")
     s.add_argument("--out", help="directory for plan.csv, candidates.csv, comparison.csv, sd.csv, eig.png")
     s.add_argument("--overwrite", action="store_true", help="replace the design already in --out")
-    s.set_defaults(func=_lazy("skinfit.analysis.design", "cli_design"))
+    s.set_defaults(func=_command("skinfit.apps.cli.design"))
     return p
-
-
-def _version():
-    from skinfit import __version__
-
-    return __version__
 
 
 def _format_warning(message, category, filename, lineno, line=None):
@@ -433,10 +230,9 @@ def _os_error_text(exc):
 
 
 def main(argv=None):
+    """Run ``skinfit ARGV`` (default: the process's arguments); returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    from skinfit.io.paths import explicit_search_path, set_search_path
-
     before = explicit_search_path()  # main() may run inside a process (a notebook, a test): put it back after
     set_search_path(args.path)
     try:
@@ -477,8 +273,6 @@ def _remove_empty(folder):
 
 def _run(args):
     try:
-        from skinfit.io.paths import check_search_path
-
         check_search_path()  # a mistyped --path or $SKINFIT_PATH folder: refused, not skipped
         for option in ("out", "report"):  # every such option names a folder: refused now, not after the work
             if getattr(args, option, None) is not None:
@@ -491,7 +285,7 @@ def _run(args):
     except InputError as exc:
         print(f"skinfit: error: {one_line(exc)}", file=sys.stderr)
         return 2
-    except _NothingFound as exc:
+    except NothingFound as exc:
         print(exc, file=sys.stderr)
         return 1
     except MissingDependency as exc:
@@ -514,7 +308,3 @@ def _run(args):
         print("skinfit: interrupted", file=sys.stderr)
         return 130
     return code or 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
