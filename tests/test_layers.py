@@ -148,7 +148,7 @@ def broken(tmp_path):
         "io/__init__.py": "",
         "io/data.py": "def load():\n    from pkg.report.html import write  # upward, inside a function\n",
         "report/__init__.py": "",
-        "report/html.py": "from ..io.data import _private\nfrom . import other\n",
+        "report/html.py": "from ..errors import _private\nfrom . import other\n",
         "report/other.py": "from pkg.report import html\n" + "x = 1\n" * 601,
     }
     for rel, text in files.items():
@@ -161,5 +161,5 @@ def broken(tmp_path):
 def test_negative_controls_each_rule_fires(broken):
     assert upward_imports(broken) == ["pkg.io.data:2 imports pkg.report.html"]
     assert cycles(broken) == [["pkg.report.html", "pkg.report.other"]]
-    assert private_imports(broken) == ["pkg.report.html:1 imports _private from pkg.io.data"]
+    assert private_imports(broken) == ["pkg.report.html:1 imports _private from pkg.errors"]
     assert long_modules(broken) == ["pkg/report/other.py: 602 lines"]
