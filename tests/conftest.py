@@ -65,11 +65,36 @@ def refused(capsys):
 #: Files whose tests exercise the mechanics around the numbers (figures drawn and laid out,
 #: reports in a browser, processes killed and resumed, campaigns, the demo): marked
 #: ``mechanics``, left out of the default run (the README's test command) and run by .ci/run.
-MECHANICS = {"test_browser.py", "test_campaign.py", "test_demo.py", "test_figure_files.py", "test_figure_store.py",
-             "test_plots.py", "test_report.py", "test_report_groups.py", "test_soak.py"}
+MECHANICS = {"test_browser.py", "test_campaign.py", "test_checkpoint.py", "test_demo.py", "test_figure_files.py",
+             "test_figure_store.py", "test_plots.py", "test_report.py", "test_report_groups.py", "test_soak.py"}
+
+
+#: Long correctness checks (samplers against quadrature and closed forms, SBC, recovery on
+#: shipped data, memory budgets): (file, test) marked ``heavy``, run by .ci/run beside the default run.
+HEAVY = {
+    ("test_population.py", "test_gibbs_and_reweighting_agree_on_the_hyper_posterior"),
+    ("test_population.py", "test_hyper_truths_in_95_intervals_and_shrinkage_helps"),
+    ("test_population.py", "test_gibbs_with_its_non_centred_moves_matches_quadrature"),
+    ("test_population.py", "test_small_sbc_passes_and_its_negative_control_fails"),
+    ("test_population.py", "test_correlated_population_gives_valid_correlations"),
+    ("test_population.py", "test_a_cached_population_is_the_same_result_and_only_for_the_same_inputs"),
+    ("test_population.py", "test_shrunk_estimates_beat_separate_fits_with_two_presses"),
+    ("test_sbc.py", "test_small_sbc_is_uniform"),
+    ("test_sbc.py", "test_wrong_prior_is_flagged"),
+    ("test_sbc.py", "test_same_seed_same_ranks_whatever_the_processes"),
+    ("test_sbc.py", "test_fork_from_a_threaded_process_never_happens_simulations_run_here"),
+    ("test_physics_wavy.py", "test_recovery_on_the_shipped_dataset"),
+    ("test_evidence.py", "test_nested_matches_closed_form"),
+    ("test_moves.py", "test_negative_control_emcee_released_snooker_is_biased"),
+    ("test_errors_resources.py", "test_class5_pointwise_groups_thinned_to_the_memory_budget"),
+    ("test_errors_resources.py", "test_class6_full_tmpfs_gives_one_line_and_no_crash"),
+    ("test_design.py", "test_skinfit_report_shows_a_design_folder_as_a_section"),
+}
 
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in MECHANICS:
             item.add_marker(pytest.mark.mechanics)
+        if (item.path.name, getattr(item, "originalname", item.name)) in HEAVY:
+            item.add_marker(pytest.mark.heavy)
