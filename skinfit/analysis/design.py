@@ -1478,11 +1478,11 @@ def plot_eig(result, path=None):
     """EIG of one measurement (nats, with +-2 MC standard errors) against the model's natural x
     axis (the card's ``[plot] x``, else the first covariate), one line per value of the other
     covariates (at most 8 shown); the plan's points marked with how often each is used."""
-    from skinfit.plots.figures import _finish, _new_figure
+    from skinfit.plots.style import finish_figure, new_figure
 
     t = result.table
     xname = result.plot.get("x")
-    fig = _new_figure(6.4, 4.0)
+    fig = new_figure(6.4, 4.0)
     ax = fig.add_subplot()
     xcol = f"{xname} [{result.units[xname]}]" if xname else None
     others = [c for c in t.columns if c.endswith("]") and c != xcol]
@@ -1509,7 +1509,7 @@ def plot_eig(result, path=None):
                  f"(size = repeats)", fontsize=9)
     if len(groups) > 1:
         ax.legend(fontsize=7)
-    return _finish(fig, path)
+    return finish_figure(fig, path)
 
 
 def load_design(out):

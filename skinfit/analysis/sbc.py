@@ -330,7 +330,7 @@ def plot_ranks(result, path=None):
     fig.suptitle(f"SBC rank histograms: {result.model} on the design of {result.dataset} "
                  f"({n} simulations; grey: 99% band under uniformity)", fontsize=9)
     if path is not None:
-        from skinfit.plots.figures import save_figure
+        from skinfit.plots.style import save_figure
 
         save_figure(fig, path, dpi=110)
     return fig
