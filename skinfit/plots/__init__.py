@@ -19,13 +19,13 @@ from skinfit.plots.comparison import plot_comparison
 from skinfit.plots.forest import plot_forest
 from skinfit.plots.pair import plot_pair
 from skinfit.plots.ppc import plot_ppc
-from skinfit.plots.predictive import observable_floor, plot_spec, ppc_bands
+from skinfit.plots.predictive import plot_spec, ppc_bands
 from skinfit.plots.prior_posterior import plot_prior_posterior
 from skinfit.plots.rank import plot_rank
 from skinfit.plots.reading import axis_label, parameter_units
 from skinfit.plots.style import DPI, MAX_WIDTH, MIN_FONT, save_figure, write_figure_files
 from skinfit.plots.trace import plot_trace
 
-__all__ = ["plot_ppc", "ppc_bands", "plot_spec", "observable_floor", "plot_pair", "plot_trace", "plot_rank",
+__all__ = ["plot_ppc", "ppc_bands", "plot_spec", "plot_pair", "plot_trace", "plot_rank",
            "plot_prior_posterior", "plot_forest", "plot_comparison", "parameter_units", "axis_label",
            "DPI", "MAX_WIDTH", "MIN_FONT", "save_figure", "write_figure_files"]
