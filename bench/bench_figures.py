@@ -5,10 +5,11 @@
 Runs ``skinfit demo`` with every fit reused (the demo's fits under ``--work``/runs, made
 first when absent, not timed) and, in place of the report's parallel figure workers, draws
 the report's figure jobs one by one in this process as a worker does (the heap frozen, the
-garbage collected once after each figure, its time in the "PNG" column): per figure the CPU seconds
-(``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig`` to PDF), and the rest
-of ``skinfit.plots.write_figure_files`` (the "PNG" column: the layout and the PNG drawn by Agg). Prints the total, the total per plot
-function and the costliest figures; ``--json`` keeps every row (for a before/after comparison). The figures are written under
+garbage collected once after each figure, its time in the "PNG" column): per figure the CPU
+seconds (``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig`` to PDF),
+and the rest of ``skinfit.plots.write_figure_files`` (the "PNG" column: the layout and the PNG
+drawn by Agg). Prints the total, the total per plot function and the costliest figures;
+``--json`` keeps every row (for a before/after comparison). The figures are written under
 ``--work``/report/figures, to be looked at.
 """
 

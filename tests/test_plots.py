@@ -14,9 +14,9 @@ import pytest
 
 import skinfit
 from skinfit import plots
+from skinfit.io import registry
 from skinfit.plots import style
 from skinfit.plots.ppc import _bands_overlap
-from skinfit.io import registry
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -11,8 +11,16 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from skinfit.errors import InputError
-from skinfit.plots.predictive import (BAND_COLUMNS, MAX_PANELS, N_GRID, median_curves, ppc_bands, ppc_draws,
-                                      ppc_median_curves, reference_curve)
+from skinfit.plots.predictive import (
+    BAND_COLUMNS,
+    MAX_PANELS,
+    N_GRID,
+    median_curves,
+    ppc_bands,
+    ppc_draws,
+    ppc_median_curves,
+    reference_curve,
+)
 from skinfit.plots.reading import axis_label, data_units, unit_factor
 from skinfit.plots.style import COLOURS, MAX_WIDTH, MIN_FONT, finish_figure, log_ticks, new_figure, suptitle, wrap_title
 from skinfit.results.fit import as_fit
@@ -83,7 +91,8 @@ def plot_ppc(fit, path=None):
     observables, one row per observable plus a row of one observable against the other;
     the wavy-surface ball-bearing curve (eq. 2) for reference when the data allow it.
     Levels of a colour column get one colour each (Okabe-Ito or viridis) and, when their bands
-    overlap, one panel each (up to 12 panels; for two observables a row or column each). Axes are in the units the data came in.
+    overlap, one panel each (up to 12 panels; for two observables a row or column each). Axes
+    are in the units the data came in.
 
     Returns the matplotlib Figure (written to ``path`` when given).
     """

@@ -93,6 +93,6 @@ def slot_values(ds, slot):
     """(chain, draw) values of one slot from a posterior/prior Dataset."""
     da = ds[slot["base"]]
     if slot["level"] is not None:
-        dim = [d for d in da.dims if d not in ("chain", "draw")][0]
+        dim = next(d for d in da.dims if d not in ("chain", "draw"))
         da = da.sel({dim: slot["level"]})
     return np.asarray(da.transpose("chain", "draw").values, dtype=float)

@@ -114,11 +114,20 @@ def finish_figure(fig, path):
 
 def fix_layout(fig):
     """Run the figure's layout engine once and keep its result (no engine left), so that the
-    PNG and the PDF saved after it show the same layout, computed once."""
+    PNG and the PDF saved after it show the same layout, computed once. Minor ticks carry no
+    labels and so do not move the layout: their locators are set aside while it is measured
+    (on a many-panel figure, making and placing them is half of constrained layout's work)."""
     engine = fig.get_layout_engine()
     if engine is None or not fig.axes:
         return
-    engine.execute(fig)
+    saved = [(axis, axis.get_minor_locator()) for ax in fig.axes for axis in (ax.xaxis, ax.yaxis)]
+    for axis, _ in saved:
+        axis.set_minor_locator(NullLocator())
+    try:
+        engine.execute(fig)
+    finally:
+        for axis, locator in reversed(saved):  # shared axes share one locator: the first saved is the original
+            axis.set_minor_locator(locator)
     fig.set_layout_engine(None)
 
 
