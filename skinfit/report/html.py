@@ -337,7 +337,8 @@ def _code_key(func):
     module = sys.modules.get("skinfit.plots")
     if type(module) is types.ModuleType:  # loaded (the lazy module is a subclass until then)
         f = getattr(module, func)
-        if not (getattr(f, "__module__", None) or "").startswith("skinfit.plots.") or getattr(f, "__qualname__", None) != func:
+        ours = (getattr(f, "__module__", None) or "").startswith("skinfit.plots.")
+        if not ours or getattr(f, "__qualname__", None) != func:
             own = "." + hashlib.sha256((text(f.__code__) if hasattr(f, "__code__") else repr(f)).encode()
                                        ).hexdigest()[:16]
     return f"{code_hash()[:16]}{own}"
