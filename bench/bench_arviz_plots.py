@@ -7,11 +7,11 @@ The fits are made once under --work (``skinfit fit`` with seed 1; reused when pr
 electroadhesion on electroadhesion_synthetic (8 sampled scalars), electroadhesion_coulomb on it
 (4, the small case), textured_surface with beta_h split by material (a per-fit forest) and
 contact_area ``--by subject`` (13 fits: the across-fit forest). Every figure is drawn at the size
-the report shows it (at most ``skinfit.plots.figures.MAX_WIDTH`` wide) and saved as the report saves it
-(``skinfit.report.html._write_png``: PNG at ``plots._DPI``, quantised, plus PDF). Per (figure, variant,
+the report shows it (at most ``skinfit.plots.MAX_WIDTH`` wide) and saved as the report saves it
+(``skinfit.plots.write_figure_files``: PNG at ``plots.DPI``, plus PDF). Per (figure, variant,
 fit): wall and CPU seconds to draw + save, the median of ``--repeats`` after one warm-up in this
 process, and the first call in a fresh process including the imports of the plotting code
-(``skinfit.report.html``/``skinfit.plots.figures``, ``arviz_plots``; the fit is loaded before the clock
+(``skinfit.report.html``/``skinfit.plots``, ``arviz_plots``; the fit is loaded before the clock
 starts); the layout problems of tests/layout.py (texts outside the canvas, overlapping, < 8 pt);
 colours of lines, markers and fills outside a colour-blind-safe set (Okabe & Ito's palette,
 greys). Writes a Markdown table to stdout and the drawn PNGs to --work/figs for a look.
@@ -40,7 +40,7 @@ FITS = {  # name -> skinfit fit arguments
     "tex": ["textured_surface", "textured_synthetic", "--split", "beta_h=material"],
     "ca_by": ["contact_area", "contact_area_synthetic", "--by", "subject"],
 }
-#: Okabe & Ito's palette (as skinfit.plots.figures._COLOURS, with its yellow) and neutral greys/black/white.
+#: Okabe & Ito's palette (as skinfit.plots.style.COLOURS, with its yellow) and neutral greys/black/white.
 SAFE = {"#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", "#f0e442", "#000000", "#666666",
         "#ffffff"}
 
@@ -94,9 +94,9 @@ def _rc():
     """The rc settings of the tuned variants: Okabe & Ito's colours as the cycle, 8-9 pt text."""
     from cycler import cycler
 
-    from skinfit.plots import figures as plots
+    from skinfit import plots
 
-    return {"axes.prop_cycle": cycler(color=list(plots._COLOURS)), "font.size": 9, "axes.titlesize": 9,
+    return {"axes.prop_cycle": cycler(color=list(plots.style.COLOURS)), "font.size": 9, "axes.titlesize": 9,
             "axes.labelsize": 9, "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.fontsize": 8}
 
 
@@ -110,9 +110,9 @@ def _fig_kwargs(width, height, constrained=True):
 def _walker_groups(fit, n_groups=4):
     """The posterior with emcee's walkers pooled into ``n_groups`` chains, as skinfit's rank
     histograms (and, since this bench, its plot_rank) group them."""
-    from skinfit.plots import figures as plots
+    from skinfit import plots
 
-    return plots._walker_groups(fit, n_groups)
+    return plots.rank.walker_groups(fit, n_groups)
 
 
 def _walkers(dt, n=8):
@@ -128,7 +128,7 @@ def _n_slots(fit):
     return len(fit.attr("slots"))
 
 
-# skinfit's sizes, as skinfit.plots.figures computes them (the arviz variants are drawn at the same size)
+# skinfit's sizes, as skinfit.plots computes them (the arviz variants are drawn at the same size)
 def _size_trace(fit):
     return 9.4, 1.35 * _n_slots(fit) + 0.9
 
@@ -145,7 +145,7 @@ def _size_grid(fit, ncols=4):
 
 
 def sk_trace(fit, ctx):
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     return plots.plot_trace(fit)
 
 
@@ -183,7 +183,7 @@ def az_rank_dist_tuned(fit, ctx):
 
 
 def sk_rank(fit, ctx):
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     return plots.plot_rank(fit)
 
 
@@ -194,7 +194,7 @@ def az_rank_default(fit, ctx):
 
 
 def sk_pair(fit, ctx):
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     return plots.plot_pair(fit)
 
 
@@ -248,7 +248,7 @@ def az_pair_tuned(fit, ctx):
 
 
 def sk_prior_posterior(fit, ctx):
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     return plots.plot_prior_posterior(fit)
 
 
@@ -282,7 +282,7 @@ def _across(ctx):
 
 
 def sk_forest_across(fit, ctx):
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     fits, pop = _across(ctx)
     return plots.plot_forest(fits, "m0", population=pop)
 
@@ -322,7 +322,7 @@ def az_forest_across_tuned(fit, ctx):
 
 
 def sk_forest_split(fit, ctx):
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     return plots.plot_forest(ctx["tex"], "beta_h")
 
 
@@ -408,11 +408,11 @@ def colours_outside(fig):
 
 def draw_once(func, fit, ctx, path):
     """Wall and CPU seconds of draw + save (PNG + PDF as the report writes them), and the figure."""
-    from skinfit.report import html as report
+    from skinfit import plots
 
     w0, c0 = time.perf_counter(), time.process_time()
     fig = func(fit, ctx)
-    report._write_png(fig, path)
+    plots.write_figure_files(fig, path)
     return time.perf_counter() - w0, time.process_time() - c0, fig
 
 

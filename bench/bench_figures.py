@@ -5,11 +5,11 @@
 Runs ``skinfit demo`` with every fit reused (the demo's fits under ``--work``/runs, made
 first when absent, not timed) and, in place of the report's parallel figure workers, draws
 the report's figure jobs one by one in this process as a worker does (the heap frozen, the
-garbage collected once after each figure, its time in the "PNG" column): per figure the CPU seconds
-(``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig``), and the rest
-of ``report._write_png`` (the "PNG" column: the layout, the PNG rendered from the PDF by PDFium,
-quantised and written; before PDFium, Agg drawing the PNG). Prints the total, the total per plot
-function and the costliest figures; ``--json`` keeps every row (for a before/after comparison). The figures are written under
+garbage collected once after each figure, its time in the "PNG" column): per figure the CPU
+seconds (``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig`` to PDF),
+and the rest of ``skinfit.plots.write_figure_files`` (the "PNG" column: the layout and the PNG
+drawn by Agg). Prints the total, the total per plot function and the costliest figures;
+``--json`` keeps every row (for a before/after comparison). The figures are written under
 ``--work``/report/figures, to be looked at.
 """
 
@@ -38,19 +38,20 @@ def main():
     from matplotlib.figure import Figure
 
     import skinfit.report.html as report
-    from skinfit.plots import figures as plots
+    from skinfit import plots
     from skinfit.apps.demo import run_demo
 
     rows = []
     pdf_time = [0.0]
     real_savefig = Figure.savefig
 
-    def savefig(self, fname, *a, **kw):  # the PDF step of report._write_png
+    def savefig(self, fname, *a, **kw):  # the PDF step of plots.write_figure_files
         t0 = time.process_time()
         try:
             return real_savefig(self, fname, *a, **kw)
         finally:
-            pdf_time[0] += time.process_time() - t0
+            if kw.get("format") == "pdf":
+                pdf_time[0] += time.process_time() - t0
 
     def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
         import gc
@@ -74,7 +75,7 @@ def main():
             pdf_time[0] = 0.0
             Figure.savefig = savefig
             try:
-                report._write_png(fig, job["path"])
+                plots.write_figure_files(fig, job["path"])
             finally:
                 Figure.savefig = real_savefig
             del fig

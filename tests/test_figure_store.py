@@ -9,7 +9,7 @@ import pytest
 
 from skinfit.report import figure_store
 
-from skinfit.plots import figures as plots
+from skinfit import plots
 
 from skinfit.report import html as report
 from skinfit.results.fit import load_fit

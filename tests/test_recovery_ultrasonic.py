@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.plots import figures as plots
+from skinfit import plots
 from recovery import check_coverage
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

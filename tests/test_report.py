@@ -16,6 +16,7 @@ import pandas as pd
 import pytest
 
 import skinfit
+from skinfit import plots
 from skinfit.report import html as report
 from skinfit.apps.cli import main
 
@@ -286,7 +287,7 @@ def test_tables_hold_the_saved_numbers(written, ea_fit, rival):
                 else:
                     assert float(got) == pytest.approx(want, rel=1e-5, abs=0), (key, name, col)
                     assert f"| {got} |" in md or f"| {got} " in md
-        units = skinfit.plots.figures.parameter_units(fit)
+        units = plots.parameter_units(fit)
         assert list(shown["unit"]) == [units[n.split("[")[0]] for n in summary.index]
         # the CSV is the summary itself, to the last bit
         csv = pd.read_csv(out / f"{key}_summary.csv", index_col=0, keep_default_na=False)
@@ -390,7 +391,7 @@ def test_a_report_with_nothing_to_draw_reads_the_stored_summary_and_imports_no_s
 _KILLED_REPORT = """
 import os, sys, time
 from pathlib import Path
-from skinfit.plots import figures as plots
+from skinfit import plots
 from skinfit.report import html as report
 from skinfit.results.fit import load_fit
 
@@ -518,7 +519,7 @@ def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
 _REDRAW = """
 import gc, os, resource, sys
 from pathlib import Path
-from skinfit.plots import figures as plots
+from skinfit import plots
 from skinfit.report import html as report
 from skinfit.results.fit import load_fit
 

@@ -109,7 +109,7 @@ def test_a_saved_fits_figures_import_what_each_needs(ea_fit, tmp_path):
     prior-against-posterior plot, which draws the densities, imports scipy.stats."""
     path = tmp_path / "fit.nc"
     ea_fit.save(path)
-    code = ("import sys\nfrom skinfit.results.fit import load_fit\nfrom skinfit.plots import figures as plots\n"
+    code = ("import sys\nfrom skinfit.results.fit import load_fit\nfrom skinfit import plots\n"
             "fit = load_fit(sys.argv[1])\n"
             "plots.plot_trace(fit), plots.plot_pair(fit)\n"
             "print('trace, pair:', 'scipy.stats' in sys.modules)\n"

@@ -3,7 +3,7 @@
 
 import numpy as np
 
-from skinfit.plots.figures import _finish, _new_figure
+from skinfit.plots.style import finish_figure, new_figure
 
 __all__ = ["plot_eig"]
 
@@ -14,7 +14,7 @@ def plot_eig(result, path=None):
     covariates (at most 8 shown); the plan's points marked with how often each is used."""
     t = result.table
     xname = result.plot.get("x")
-    fig = _new_figure(6.4, 4.0)
+    fig = new_figure(6.4, 4.0)
     ax = fig.add_subplot()
     xcol = f"{xname} [{result.units[xname]}]" if xname else None
     others = [c for c in t.columns if c.endswith("]") and c != xcol]
@@ -41,4 +41,4 @@ def plot_eig(result, path=None):
                  f"(size = repeats)", fontsize=9)
     if len(groups) > 1:
         ax.legend(fontsize=7)
-    return _finish(fig, path)
+    return finish_figure(fig, path)

@@ -7,7 +7,7 @@ from matplotlib.figure import Figure
 from scipy import stats
 
 from skinfit.analysis.sbc import n_bins
-from skinfit.plots.figures import save_figure
+from skinfit.plots.style import save_figure
 
 __all__ = ["plot_ranks"]
 

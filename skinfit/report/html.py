@@ -48,14 +48,14 @@ def _lazy_module(name):
     return module
 
 
-plots = _lazy_module("skinfit.plots.figures")
+plots = _lazy_module("skinfit.plots")
 
 #: Thresholds of the warnings at the top of a report.
 MIN_ACCEPTANCE_MEAN = 0.1
 MAX_OUTSIDE_SUPPORT = 0.05  # share of log-density evaluations
 MAX_RHAT = 1.05  # over walkers: a secondary check
 
-_FIGURES = (  # (file name, skinfit.plots.figures function, caption)
+_FIGURES = (  # (file name, skinfit.plots function, caption)
     ("ppc", "plot_ppc", "Posterior predictive: the data over the 50% and 90% posterior-predictive "
                         "bands and the posterior median curve, in the units the data came in"),
     ("prior_posterior", "plot_prior_posterior", "Prior (line) against posterior (filled) per parameter: "
@@ -324,7 +324,7 @@ def _code_key(func):
     """What draws a figure: the package source and plotting libraries' versions
     (:func:`skinfit.report.figure_store.code_hash`) and, when ``skinfit.plots.<func>`` is not skinfit's
     own function (a test's or a user's replacement), that function's code: a replaced plot
-    draws again. Does not import skinfit.plots.figures (nothing is replaced in a module not loaded)."""
+    draws again. Does not import skinfit.plots (nothing is replaced in a module not loaded)."""
     import types
 
     from skinfit.report.figure_store import code_hash
@@ -334,10 +334,11 @@ def _code_key(func):
         return repr((code.co_code, code.co_names, code.co_varnames, consts))
 
     own = ""
-    module = sys.modules.get("skinfit.plots.figures")
+    module = sys.modules.get("skinfit.plots")
     if type(module) is types.ModuleType:  # loaded (the lazy module is a subclass until then)
         f = getattr(module, func)
-        if getattr(f, "__module__", None) != "skinfit.plots.figures" or getattr(f, "__qualname__", None) != func:
+        ours = (getattr(f, "__module__", None) or "").startswith("skinfit.plots.")
+        if not ours or getattr(f, "__qualname__", None) != func:
             own = "." + hashlib.sha256((text(f.__code__) if hasattr(f, "__code__") else repr(f)).encode()
                                        ).hexdigest()[:16]
     return f"{code_hash()[:16]}{own}"
@@ -479,13 +480,9 @@ def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
                 if fits[i].pending:  # computed once here; a saved fit's are read by the worker drawing it
                     fits[i].complete()
                 fits[i].summary()  # inherited by the workers
-            plots._DPI  # noqa: B018  the plotting module and matplotlib imported once, before the fork
+            plots.DPI  # noqa: B018  the plotting modules and matplotlib imported once, before the fork
             import matplotlib.backends.backend_pdf  # noqa: F401
             import PIL.PngImagePlugin  # noqa: F401
-
-            from skinfit.plots._pdf_font import derived
-
-            derived()  # the figures' font found (derived, the first time) once, before the fork
 
             with _frozen_heap(), ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
                                                      initializer=_init_worker, initargs=(os.getpid(),)) as pool:
@@ -586,55 +583,8 @@ def _write_manifest(figdir, manifest):
 
 
 def _write_png(fig, path):
-    """The figure as a vector PDF (dense scatter rasterised; TrueType fonts, :data:`plots.SAVE_RC`),
-    for papers, and as a PNG of that PDF rendered by PDFium at :data:`plots._DPI`, quantised to
-    256 colours (a third of the size, no visible change for line art). The layout is computed
-    once (:func:`plots._fix_layout`) and the figure drawn once, into the PDF, which PDFium
-    rasterises (bench/results/report.md)."""
-    import io
-
-    import pypdfium2
-    from PIL import Image
-
-    fig.set_dpi(plots._DPI)
-    plots._fix_layout(fig)
-    buffer = io.BytesIO()
-    plots.save_figure(fig, buffer, format="pdf", metadata={"CreationDate": None})  # the same figure, the same bytes
-    pdf = _stable_font_tags(buffer.getvalue())
-    document = pypdfium2.PdfDocument(pdf)
-    page = document[0]
-    try:  # in RGB byte order, no alpha (the page is filled white): no conversion of PDFium's BGRA
-        image = page.render(scale=plots._DPI / 72, rev_byteorder=True, prefer_bgrx=True).to_pil()
-        image = image.convert("RGB")  # a copy, independent of PDFium's bitmap (RGBX from pypdfium2 4)
-    finally:
-        page.close()
-        document.close()
-    image.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE).save(
-        path, format="PNG", compress_level=6)
-    Path(path).with_suffix(".pdf").write_bytes(pdf)
-
-
-_SUBSET_TAG = re.compile(rb"(/(?:BaseFont|FontName|Name) /)([A-Z]{6})(?=\+)")
-
-
-def _stable_font_tags(pdf):
-    """``pdf`` with its font-subset tags (``/BaseFont /GXDUII+DejaVuSans``) made independent of
-    the process: matplotlib derives them from ``hash()`` of the subset's glyphs, which Python
-    salts per process, so the same figure gave other bytes in each. Each distinct tag becomes,
-    in order of first appearance, AAAAAA, AAAAAB, ...: the same length, so every byte offset and
-    the cross-reference table stay valid (PDF reference 1.7, 5.5.3: the tag is arbitrary)."""
-    tags = {}
-
-    def fixed(match):
-        if match.group(2) not in tags:
-            n, letters = len(tags), []
-            for _ in range(6):
-                n, r = divmod(n, 26)
-                letters.append(chr(65 + r))
-            tags[match.group(2)] = "".join(reversed(letters)).encode()
-        return match.group(1) + tags[match.group(2)]
-
-    return _SUBSET_TAG.sub(fixed, pdf)
+    """The figure as a PNG at ``path`` and a PDF beside it (:func:`skinfit.plots.write_figure_files`)."""
+    plots.write_figure_files(fig, path)
 
 
 def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
@@ -694,7 +644,7 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         A model-comparison table (e.g. :func:`skinfit.compare`): shown as a table and a chart,
         written as ``comparison.csv`` (``comparison_<name>.csv`` for several).
     population : mapping parameter -> distribution, optional
-        Population distributions drawn on the forest plots (see :func:`skinfit.plots.figures.plot_forest`);
+        Population distributions drawn on the forest plots (see :func:`skinfit.plots.plot_forest`);
         also keyed by model id first, or a DataFrame indexed by parameter, or a
         :class:`skinfit.analysis.population.population.PopulationResult` (a new subject's predictive draws).
     populations : dict model id -> population result, optional
