@@ -16,7 +16,7 @@ UV=.venv/bin/uv
 echo "== lowest direct versions =="
 "$UV" venv -q --python "$PY" "$WORK/low"
 VIRTUAL_ENV="$WORK/low" "$UV" pip install -q --resolution lowest-direct -e ".[test]"
-VIRTUAL_ENV="$WORK/low" "$UV" pip freeze | grep -Ei '^(numpy|scipy|pandas|xarray|arviz[a-z-]*|emcee|nlopt|h5netcdf|h5py|matplotlib|jinja2|platformdirs|threadpoolctl)=='
+VIRTUAL_ENV="$WORK/low" "$UV" pip freeze | grep -Ei '^(numpy|scipy|pandas|xarray|arviz[a-z-]*|emcee|nlopt|h5netcdf|h5py|matplotlib|pillow|jinja2|platformdirs|threadpoolctl)=='
 "$WORK/low/bin/python" -m pytest -q -p no:cacheprovider -m "not slow" tests/test_models.py tests/test_priors.py \
   tests/test_data.py tests/test_physics_electroadhesion.py tests/test_fit.py tests/test_compare.py \
   tests/test_references.py tests/test_public_api.py tests/test_figure_files.py tests/test_startup.py \
