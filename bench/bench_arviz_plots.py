@@ -8,10 +8,10 @@ electroadhesion on electroadhesion_synthetic (8 sampled scalars), electroadhesio
 (4, the small case), textured_surface with beta_h split by material (a per-fit forest) and
 contact_area ``--by subject`` (13 fits: the across-fit forest). Every figure is drawn at the size
 the report shows it (at most ``skinfit.plots.figures.MAX_WIDTH`` wide) and saved as the report saves it
-(``skinfit.report.html._write_png``: PNG at ``plots._DPI``, quantised, plus PDF). Per (figure, variant,
+(``skinfit.report.figure_files.write_png``: PNG at ``plots._DPI``, quantised, plus PDF). Per (figure, variant,
 fit): wall and CPU seconds to draw + save, the median of ``--repeats`` after one warm-up in this
 process, and the first call in a fresh process including the imports of the plotting code
-(``skinfit.report.html``/``skinfit.plots.figures``, ``arviz_plots``; the fit is loaded before the clock
+(``skinfit.report.figure_files``/``skinfit.plots.figures``, ``arviz_plots``; the fit is loaded before the clock
 starts); the layout problems of tests/layout.py (texts outside the canvas, overlapping, < 8 pt);
 colours of lines, markers and fills outside a colour-blind-safe set (Okabe & Ito's palette,
 greys). Writes a Markdown table to stdout and the drawn PNGs to --work/figs for a look.
@@ -408,11 +408,11 @@ def colours_outside(fig):
 
 def draw_once(func, fit, ctx, path):
     """Wall and CPU seconds of draw + save (PNG + PDF as the report writes them), and the figure."""
-    from skinfit.report import html as report
+    from skinfit.report.figure_files import write_png
 
     w0, c0 = time.perf_counter(), time.process_time()
     fig = func(fit, ctx)
-    report._write_png(fig, path)
+    write_png(fig, path)
     return time.perf_counter() - w0, time.process_time() - c0, fig
 
 

@@ -32,19 +32,6 @@ def no_figures(monkeypatch):
     monkeypatch.setattr(report, "render_figures", drawn)
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _figure_store(tmp_path_factory):
-    """Figures drawn by the tests are kept in a folder of this session (and seen by the CLI
-    processes the tests start), never in the user's cache folder."""
-    old = os.environ.get("SKINFIT_FIGURE_STORE")
-    os.environ["SKINFIT_FIGURE_STORE"] = str(tmp_path_factory.mktemp("figure_store"))
-    yield
-    if old is None:
-        os.environ.pop("SKINFIT_FIGURE_STORE", None)
-    else:
-        os.environ["SKINFIT_FIGURE_STORE"] = old
-
-
 @pytest.fixture
 def refused(capsys):
     """``refused(argv, where, message)``: the CLI run on ``argv`` exits 2 with exactly the one

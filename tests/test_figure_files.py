@@ -1,5 +1,6 @@
-"""The report's figure files (``report._write_png``): the PDF drawn by matplotlib, the PNG that
-PDF rendered by PDFium. Checked against matplotlib's own Agg rendering of the same figure."""
+"""The report's figure files (:func:`skinfit.report.figure_files.write_png`): the PDF drawn by
+matplotlib, the PNG that PDF rendered by PDFium. Checked against matplotlib's own Agg rendering
+of the same figure."""
 
 import io
 
@@ -9,8 +10,7 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 from skinfit.plots import figures as plots
-
-from skinfit.report import html as report
+from skinfit.report.figure_files import write_png
 
 
 def _figure():
@@ -32,7 +32,7 @@ def _blocks(image, size=6):
 
 def test_png_and_pdf_show_the_figure_agg_would_draw(tmp_path):
     fig = _figure()
-    report._write_png(fig, tmp_path / "f.png")
+    write_png(fig, tmp_path / "f.png")
     png = np.asarray(Image.open(tmp_path / "f.png").convert("RGB"), dtype=float)
     # matplotlib's raster of the same figure, at the same size and laid out the same way
     FigureCanvasAgg(fig).draw()
@@ -74,10 +74,10 @@ def test_the_same_figure_gives_the_same_files(tmp_path):
     import subprocess
     import sys
 
-    draw = ("import sys\nfrom matplotlib.figure import Figure\nfrom skinfit.report import html as report\n"
+    draw = ("import sys\nfrom matplotlib.figure import Figure\nfrom skinfit.report.figure_files import write_png\n"
             "fig = Figure(figsize=(4, 2), layout='constrained')\nax = fig.subplots()\n"
             "ax.plot([0, 1], [0, 1]); ax.set(xlabel='normal force [N]', title='a title')\n"
-            "report._write_png(fig, sys.argv[1])\n")
+            "write_png(fig, sys.argv[1])\n")
     for seed, name in (("1", "a.png"), ("2", "b.png")):
         subprocess.run([sys.executable, "-c", draw, str(tmp_path / name)], check=True,
                        env={**os.environ, "PYTHONHASHSEED": seed, "MPLBACKEND": "Agg"})
@@ -111,7 +111,7 @@ def test_saved_pdfs_embed_truetype_fonts_not_type3(tmp_path):
     title's text in it."""
     import pypdfium2
 
-    report._write_png(_figure(), tmp_path / "f.png")
+    write_png(_figure(), tmp_path / "f.png")
     plots._finish(_figure(), tmp_path / "g.pdf")
     for name in ("f.pdf", "g.pdf"):
         pdf = (tmp_path / name).read_bytes()

@@ -600,7 +600,7 @@ def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name
     constrained layout with every tick puts them, and the figure as saved keeps the rules."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from skinfit.report import html as report
+    from skinfit.report.figure_files import write_png
 
     fit = fits("contact_area", "contact_area_synthetic")  # log axes on both sides, many panels
     func = dict(FIGURES)[name]
@@ -608,7 +608,7 @@ def test_the_report_lays_a_figure_out_once_as_constrained_layout_does(fits, name
     ref.set_dpi(plots._DPI)
     FigureCanvasAgg(ref).draw()
     fig = func(fit)
-    report._write_png(fig, tmp_path / "f.png")
+    write_png(fig, tmp_path / "f.png")
     assert fig.get_layout_engine() is None
     assert any(plots._MinorMarks.of(ax, w) is not None for ax in fig.axes for w in "xy")
     np.testing.assert_allclose([ax.get_position().bounds for ax in fig.axes],

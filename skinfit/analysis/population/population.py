@@ -54,7 +54,7 @@ import numpy as np
 import pandas as pd
 
 from skinfit.errors import InputError
-from skinfit.report.figure_store import storable
+from skinfit.io.shipped import shipped_physics
 from skinfit.inference.checkpoint import replace_atomic
 from skinfit.results.fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator, load_fit
 from skinfit.io import integrity
@@ -697,7 +697,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     check_subjects(fits, digests)
     key = None
     if (cache is not None and isinstance(seed, (int, np.integer)) and all(isinstance(f, Fit) for f in fits.values())
-            and all(storable(f) for f in fits.values())):  # a user's model code is not in the key: not kept
+            and all(shipped_physics(f.model_id, f.attrs.get("model_sha256"))
+                    for f in fits.values())):  # a user's model code is not in the key: not kept
         key = _cache_key(fits, {"parameters": parameters, "family": family, "correlated": correlated,
                                 "method": method, "seed": int(seed), "chains": chains, "ess_target": ess_target,
                                 "rhat_max": rhat_max, "max_sweeps": max_sweeps, "burn": burn,
