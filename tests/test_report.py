@@ -18,6 +18,7 @@ import skinfit
 from skinfit.apps.cli import main
 from skinfit.plots import figures as plots
 from skinfit.report import html as report
+from skinfit.report.tables import break_at_underscores
 
 
 class _Page(HTMLParser):
@@ -210,14 +211,15 @@ def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_
     calls = []
 
     def analyses():
-        calls.append((forkable(), [p.name for p in multiprocessing.active_children()]))
+        calls.append([p.name for p in multiprocessing.active_children()])
         return {"comparison": comparison}
 
     out = tmp_path / "hooked"
+    fork = forkable()  # asked before: while the workers draw, their pool's thread runs here
     report.write_report([ea_fit, rival], out, title="hooked", analyses=analyses)
     # figure workers are forked only from a process without other threads (an earlier test's Dask
     # client leaves its threads here); otherwise the figures are drawn after, in this process
-    assert len(calls) == 1 and bool(calls[0][1]) == calls[0][0], calls
+    assert len(calls) == 1 and bool(calls[0]) == fork, (fork, calls)
     assert pd.read_csv(out / "comparison.csv", index_col=0).loc["electroadhesion", "log_z"] == 512.25
     assert "figures/comparison.png" in (out / "index.html").read_text()
     assert (out / "figures" / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -457,7 +459,7 @@ def test_table_names_break_at_their_underscores_and_stay_escaped(written):
     assert '<td class="text">electroadhesion_<wbr>coulomb</td>' in html
     assert ">log_<wbr>z_<wbr>se</th>" in html
     assert "electroadhesion_coulomb" in _frame(_parse(index).tables[("comparison", "comparison.csv")]).index
-    assert str(report._break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
+    assert str(break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
 
 
 def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path, no_figures, capsys):
