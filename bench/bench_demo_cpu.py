@@ -2,13 +2,14 @@
 
     MPLBACKEND=Agg .venv/bin/python bench/bench_demo_cpu.py --work /tmp/demo-cpu [--source OLD_CHECKOUT ...]
 
-Runs the demo from nothing (fits, figures into an empty figure store, population, report) in
-a child process per source tree (this checkout, and each ``--source`` given, e.g. a ``git
+Runs the demo from nothing (fits, population, report and its figures) in a child process per
+source tree (this checkout, and each ``--source`` given, e.g. a ``git
 archive`` of an older commit, imported through PYTHONPATH), the sources one after another.
 In the child the demo's worker tasks are wrapped before the workers fork: per fit the CPU
-seconds of fit + evidence + LOO + save (``demo._run_one``), per fit the CPU seconds of drawing
-its report figures into the store (``demo._draw_one``); then the main process's CPU, its
-children's CPU and the wall time. Prints one row per source.
+seconds of fit + evidence + LOO + save (``demo._run_one``) and, for an older source whose fit
+workers drew the report's figures into a figure store, the CPU seconds of that drawing
+(``demo._draw_one``); then the main process's CPU, its children's CPU and the wall time. Prints
+one row per source.
 """
 
 import argparse
@@ -25,7 +26,7 @@ import json, resource, sys, time
 import skinfit.apps.demo as demo
 
 log, runs, report = sys.argv[1:4]
-fit_one, draw_one = demo._run_one, demo._draw_one
+fit_one, draw_one = demo._run_one, getattr(demo, "_draw_one", None)  # the latter: older sources only
 
 def record(row):
     with open(log, "a") as f:
@@ -43,7 +44,9 @@ def draw(path, n_of_model):
     record({"kind": "draw", "path": str(path), "cpu": time.process_time() - t, "figures": n})
     return n
 
-demo._run_one, demo._draw_one = run_one, draw  # inherited by the forked fit workers
+demo._run_one = run_one  # inherited by the forked fit workers
+if draw_one is not None:
+    demo._draw_one = draw
 wall, cpu = time.perf_counter(), time.process_time()
 demo.run_demo(runs, report, echo=lambda *a: None)
 children = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -57,7 +60,7 @@ def run(source, work):
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
     log = work / "cpu.jsonl"
-    env = {**os.environ, "MPLBACKEND": "Agg", "SKINFIT_FIGURE_STORE": str(work / "store")}
+    env = {**os.environ, "MPLBACKEND": "Agg", "SKINFIT_FIGURE_STORE": str(work / "store")}  # older sources' store
     if source is not None:
         env["PYTHONPATH"] = str(Path(source).resolve())
     subprocess.run([sys.executable, "-c", CHILD, str(log), str(work / "runs"), str(work / "report")],

@@ -4,12 +4,11 @@
 
 Runs ``skinfit demo`` with every fit reused (the demo's fits under ``--work``/runs, made
 first when absent, not timed) and, in place of the report's parallel figure workers, draws
-the report's figure jobs one by one in this process as a worker does (the heap frozen, the
-garbage collected once after each figure, its time in the "PNG" column): per figure the CPU
-seconds (``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig`` to PDF),
-and the rest of ``skinfit.plots.write_figure_files`` (the "PNG" column: the layout and the PNG
-drawn by Agg). Prints the total, the total per plot function and the costliest figures;
-``--json`` keeps every row (for a before/after comparison). The figures are written under
+the report's figure jobs one by one in this process as a worker does: per figure the CPU seconds
+(``time.process_time``) to build the Figure, to draw the PDF (``Figure.savefig`` to PDF), and the
+rest of ``skinfit.plots.write_figure_files`` (the "PNG" column: the layout and the PNG drawn by
+Agg, quantised and written). Prints the total, the total per plot function and the costliest
+figures; ``--json`` keeps every row (for a before/after comparison). The figures are written under
 ``--work``/report/figures, to be looked at.
 """
 
@@ -40,6 +39,7 @@ def main():
     import skinfit.report.html as report
     from skinfit import plots
     from skinfit.apps.demo import run_demo
+    from skinfit.report import figures
 
     rows = []
     pdf_time = [0.0]
@@ -54,22 +54,17 @@ def main():
                 pdf_time[0] += time.process_time() - t0
 
     def render_figures(fits, jobs, figdir, workers=None, meanwhile=None):
-        import gc
-
         if meanwhile is not None:  # the page's other sections, computed while the workers draw: their figures too
             jobs = list(jobs) + list(meanwhile())
 
         for f in fits:  # as render_figures does before it forks its workers: not figure time
             f.complete()
             f.summary()
-        report._FITS, report._JOBS = fits, jobs
+        figures._FITS, figures._JOBS = fits, jobs
         errors = []
-        gc.collect()
-        gc.freeze()  # as report._frozen_heap and report._init_worker leave a worker
-        gc.disable()
         for job in jobs:
             t0 = time.process_time()
-            fig = getattr(plots, job["func"])(*report._job_args(job), **job.get("kwargs", {}))
+            fig = getattr(plots, job["func"])(*figures._job_args(job), **job.get("kwargs", {}))
             t1 = time.process_time()
             n_axes, size = len(fig.axes), [round(v, 2) for v in fig.get_size_inches()]
             pdf_time[0] = 0.0
@@ -79,14 +74,11 @@ def main():
             finally:
                 Figure.savefig = real_savefig
             del fig
-            gc.collect(1)  # as report._render_one
             t2 = time.process_time()
             rows.append({"figure": job["path"].name, "func": job["func"], "build": t1 - t0,
                          "png": t2 - t1 - pdf_time[0], "pdf": pdf_time[0], "axes": n_axes, "size": size})
             errors.append(None)
-        report._FITS, report._JOBS = [], []
-        gc.enable()
-        gc.unfreeze()
+        figures._FITS, figures._JOBS = [], []
         return errors
 
     real = report.render_figures

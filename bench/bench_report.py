@@ -3,13 +3,12 @@
     .venv/bin/python bench/bench_report.py [--work /tmp/skinfit-bench-report] [--skip-fresh]
     .venv/bin/python bench/bench_report.py --report-only [--work DIR] [--profile FILE]
 
-Rows (whole processes, the figure store in ``WORK/store``): the whole ``skinfit demo`` from
-nothing (27 fits: 15 compared + 12 more contact_area subjects, the 13-subject population,
-contrasts, report; the figure store empty); the demo again with every fit reused and both the
-report's figures and the store emptied (every figure drawn); ``skinfit report`` of the 15 fits
-the demo had when the report's target was set (every figure drawn); into a new report folder
-with the store kept (figures copied from it); again into the same folder (everything reused);
-``skinfit report`` of one fit with its figures new (store emptied), then reused. Written to
+Rows (whole processes): the whole ``skinfit demo`` from nothing (27 fits: 15 compared + 12 more
+contact_area subjects, the 13-subject population, contrasts, report); the demo again with every
+fit reused and the report's figures emptied (every figure drawn); ``skinfit report`` of the 15
+fits the demo had when the report's target was set (every figure drawn); the demo into a new
+report folder (every figure drawn); again into the same folder (everything reused);
+``skinfit report`` of one fit with its figures new, then reused. Written to
 bench/results/report_commands.md with the machine and its load: wall, and user + sys CPU of
 the process and its children.
 
@@ -58,7 +57,7 @@ def _report_only(work, profile):
     import os
     import resource
 
-    os.environ["SKINFIT_FIGURE_STORE"] = "off"  # this mode measures drawing: no figure copied from the store
+    import skinfit.report.figures as figures
     import skinfit.report.html as report
     from skinfit.apps.demo import run_demo
 
@@ -74,12 +73,12 @@ def _report_only(work, profile):
         if profile and not times:
             import cProfile
 
-            workers, report.MAX_FIGURE_WORKERS = report.MAX_FIGURE_WORKERS, 1
+            workers, figures.MAX_FIGURE_WORKERS = figures.MAX_FIGURE_WORKERS, 1
             prof = cProfile.Profile()
             try:
                 out = prof.runcall(real, *args, **kwargs)
             finally:
-                report.MAX_FIGURE_WORKERS = workers
+                figures.MAX_FIGURE_WORKERS = workers
             prof.dump_stats(profile)
         else:
             out = real(*args, **kwargs)
@@ -136,35 +135,31 @@ def main():
     work.mkdir(parents=True, exist_ok=True)
     import os
 
-    runs, rep, store = work / "runs", work / "report", work / "store"
-    env = {**os.environ, "SKINFIT_FIGURE_STORE": str(store), "MPLBACKEND": "Agg"}
+    runs, rep = work / "runs", work / "report"
+    env = {**os.environ, "MPLBACKEND": "Agg"}
     demo = ["demo", "--out", str(runs), "--report"]
     rows = []
     if not args.skip_fresh:
-        rows.append(("whole `skinfit demo` from nothing (27 fits, population, contrasts, report; empty figure store)",
+        rows.append(("whole `skinfit demo` from nothing (27 fits, population, contrasts, report)",
                      "< 60 s", *timed(demo + [str(rep)], work / "fresh.log", env)))
     else:
         timed(demo + [str(rep)], work / "warmup.log", env)
     shutil.rmtree(rep / "figures", ignore_errors=True)
-    shutil.rmtree(store, ignore_errors=True)
-    rows.append(("`skinfit demo`, every fit reused, every figure drawn (report figures and store emptied)", "< 20 s",
+    rows.append(("`skinfit demo`, every fit reused, every figure drawn (report figures emptied)", "< 20 s",
                  *timed(demo + [str(rep)], work / "reused.log", env)))
     fifteen = sorted(str(p) for p in runs.rglob("fit.nc") if not p.parent.name.startswith("subject-"))
-    for folder in ("report15", "store15"):
-        shutil.rmtree(work / folder, ignore_errors=True)
+    shutil.rmtree(work / "report15", ignore_errors=True)
     rows.append((f"`skinfit report` of the demo's {len(fifteen)} fits but the 12 more contact_area subjects (the "
-                 "demo when the target was set), every figure drawn (a store of its own, empty)", "< 20 s",
-                 *timed(["report", *fifteen, "--out", str(work / "report15")], work / "report15.log",
-                        env | {"SKINFIT_FIGURE_STORE": str(work / "store15")})))
+                 "demo when the target was set), every figure drawn", "< 20 s",
+                 *timed(["report", *fifteen, "--out", str(work / "report15")], work / "report15.log", env)))
     shutil.rmtree(work / "report2", ignore_errors=True)
-    rows.append(("`skinfit demo`, every fit reused, into a new report folder (figures copied from the store)",
+    rows.append(("`skinfit demo`, every fit reused, into a new report folder (every figure drawn)",
                  "< 20 s", *timed(demo + [str(work / "report2")], work / "report2.log", env)))
     rows.append(("`skinfit demo`, fits and figures reused (same report folder)", "",
                  *timed(demo + [str(rep)], work / "cached.log", env)))
     one = runs / "electroadhesion_synthetic" / "electroadhesion"
     shutil.rmtree(work / "one", ignore_errors=True)
-    shutil.rmtree(store, ignore_errors=True)
-    rows.append(("`skinfit report` of one fit (electroadhesion), figures drawn (store emptied)", "< 3 s",
+    rows.append(("`skinfit report` of one fit (electroadhesion), figures drawn", "< 3 s",
                  *timed(["report", str(one), "--out", str(work / "one")], work / "one.log", env)))
     rows.append(("the same again, figures reused", "< 3 s",
                  *timed(["report", str(one), "--out", str(work / "one")], work / "one2.log", env)))

@@ -4,8 +4,8 @@ or a Dask client does) and from one that does not, for two checkouts alternately
     .venv/bin/python bench/bench_report_fork.py --fits A/fit.nc B/fit.nc --old OLD_SRC [--repeats 3]
 
 Each timing is a new interpreter that loads the fits, optionally starts one idle thread, and
-times :func:`skinfit.report.html.write_report` into a new folder with the figure store off (every
-figure drawn). ``OLD_SRC`` is a folder holding an earlier ``skinfit`` package (e.g. from ``git
+times :func:`skinfit.report.html.write_report` into a new folder (every figure drawn; an older
+checkout's figure store turned off). ``OLD_SRC`` is a folder holding an earlier ``skinfit`` package (e.g. from ``git
 archive``), put first on ``PYTHONPATH``; the new code is this checkout's. Printed as a markdown
 table (bench/results/report_commands.md).
 """

@@ -32,19 +32,6 @@ def no_figures(monkeypatch):
     monkeypatch.setattr(report, "render_figures", drawn)
 
 
-@pytest.fixture(scope="session", autouse=True)
-def _figure_store(tmp_path_factory):
-    """Figures drawn by the tests are kept in a folder of this session (and seen by the CLI
-    processes the tests start), never in the user's cache folder."""
-    old = os.environ.get("SKINFIT_FIGURE_STORE")
-    os.environ["SKINFIT_FIGURE_STORE"] = str(tmp_path_factory.mktemp("figure_store"))
-    yield
-    if old is None:
-        os.environ.pop("SKINFIT_FIGURE_STORE", None)
-    else:
-        os.environ["SKINFIT_FIGURE_STORE"] = old
-
-
 @pytest.fixture
 def refused(capsys):
     """``refused(argv, where, message)``: the CLI run on ``argv`` exits 2 with exactly the one
@@ -66,7 +53,7 @@ def refused(capsys):
 #: reports in a browser, processes killed and resumed, campaigns, the demo): marked
 #: ``mechanics``, left out of the default run (the README's test command) and run by .ci/run.
 MECHANICS = {"test_browser.py", "test_campaign.py", "test_checkpoint.py", "test_demo.py", "test_figure_files.py",
-             "test_figure_store.py", "test_plots.py", "test_report.py", "test_report_groups.py", "test_soak.py"}
+             "test_figure_folder.py", "test_own_files.py", "test_plots.py", "test_report.py", "test_report_groups.py", "test_soak.py"}
 
 
 #: Long correctness checks (samplers against quadrature and closed forms, SBC, recovery on

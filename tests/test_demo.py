@@ -36,27 +36,27 @@ print(json.dumps(sorted(m for m in sys.modules if m in heavy or m.split(".")[0] 
 
 
 def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
-    from skinfit.report import html as report_module
+    from skinfit.report import figures as report_figures
 
     drawn = []  # per-fit figures the report process draws itself (one figure worker: in this process)
-    render = report_module._render_one
-    monkeypatch.setattr(report_module, "MAX_FIGURE_WORKERS", 1)
+    render = report_figures.render_one
+    monkeypatch.setattr(report_figures, "MAX_FIGURE_WORKERS", 1)
 
     def counted(i):
-        if report_module._JOBS[i]["fit"] is not None:
-            drawn.append(i)
+        if report_figures._JOBS[i]["fit"] is not None:
+            drawn.append(report_figures._JOBS[i]["path"].name)
         return render(i)
 
-    monkeypatch.setattr(report_module, "_render_one", counted)
+    monkeypatch.setattr(report_figures, "render_one", counted)
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic", "--jobs", "2"]) == 0
     text = capsys.readouterr().out
     assert "ranked by evidence" in text and "report:" in text
     report = out / "report"
     assert (report / "index.html").exists() and (report / "comparison_electroadhesion_synthetic.csv").exists()
-    # every fit's figures were drawn by the fit workers into the figure store, and copied
+    # every fit's figures drawn by the report
     figures = sorted((report / "figures").glob("electroadhesion_synthetic_*.png"))
-    assert len(figures) == 3 * len(report_module._FIGURES) and drawn == []
+    assert len(figures) == 3 * len(report_figures.FIGURES) and sorted(drawn) == [f.name for f in figures]
     assert all(f.with_suffix(".pdf").stat().st_size > 0 for f in figures)
     plan = json.loads((report / "demo_plan.json").read_text())
     assert [p["model"] for p in plan] == ["electroadhesion", "electroadhesion_coulomb", "electroadhesion_empirical"]
@@ -71,9 +71,10 @@ def test_demo_fits_compares_and_reports(tmp_path, capsys, monkeypatch):
         cached, fresh = json.loads(fit.attrs["loo"]), loo(fit)
         assert cached["elpd"] == pytest.approx(float(fresh.elpd), rel=1e-12)
         assert cached["se"] == pytest.approx(float(fresh.se), rel=1e-12)
-    # a second run reuses the saved fits
+    # a second run reuses the saved fits, and the report folder keeps their figures
+    drawn.clear()
     assert main(["demo", "--out", str(out), "--dataset", "electroadhesion_synthetic"]) == 0
-    assert "(3 already done" in capsys.readouterr().out
+    assert "(3 already done" in capsys.readouterr().out and drawn == []
     # ... and, in a new process, imports no sampler, optimiser or units library to decide that
     # and rewrite the report
     import subprocess

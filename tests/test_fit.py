@@ -16,7 +16,7 @@ from skinfit.errors import InputError
 from pointwise import check_pointwise_groups
 from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
-from skinfit.report.html import fit_diagnostics
+from skinfit.report.checks import fit_diagnostics
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 CARD = tomllib.loads((ROOT / "datasets/electroadhesion_synthetic/dataset.toml").read_text())

@@ -12,7 +12,7 @@ import skinfit
 from skinfit.inference import guardrails
 from skinfit.apps.cli import main
 from skinfit.posterior import Posterior
-from skinfit.report.html import fit_diagnostics
+from skinfit.report.checks import fit_diagnostics
 from skinfit.inference.sampling import SamplerRun
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

@@ -15,7 +15,8 @@ import skinfit
 from skinfit.results.run_labels import run_labels
 from skinfit.analysis.misfit import ALPHA, MisfitWarning, check_fit, simulated_check
 from skinfit.posterior import Posterior
-from skinfit.report.html import _as_fits, fit_diagnostics
+from skinfit.report.checks import fit_diagnostics
+from skinfit.report.html import _as_fits
 
 #: electroadhesion_coulomb parameters for the issue's case (mu, E_star, d_air, sigma), near
 #: the shipped electroadhesion data's: friction 0.6, 35 kPa, 0.19 um air gap, 20 mN noise

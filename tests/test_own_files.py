@@ -1,7 +1,7 @@
 """Class: a tidy step deletes what it did not write. Every place skinfit removes or replaces a
 file it finds (temporary files of killed writers, a lock's leftovers, a report's earlier
-tables) touches only files it can show are its own; a user's files of like names survive.
-(The figure store's trimming: tests/test_figure_store.py.)"""
+tables, its figures) touches only files it can show are its own; a user's files of like names
+survive. (What a report folder's figures keep and redraw: tests/test_figure_folder.py.)"""
 
 import os
 import subprocess
@@ -13,6 +13,8 @@ import pytest
 
 import skinfit
 from popdata import write_population
+from skinfit.plots import figures as plots
+from skinfit.report import figures
 from skinfit.report import html as report
 from skinfit.inference.checkpoint import CheckpointLock, _host, remove_stale_temps, temp_file
 from skinfit.analysis.groups import fit_by
@@ -80,3 +82,54 @@ def test_class_tidy_a_run_by_groups_looks_only_in_its_own_folders(tmp_path, fold
         warnings.simplefilter("ignore", skinfit.ConvergenceWarning)
         fit_by("electroadhesion_coulomb", path, "subject", out, seed=1, ess_target=50, max_steps=300)
     assert keep.read_text() == "a user's file"
+
+
+def test_class_tidy_a_report_removes_only_figures_it_wrote_and_can_prove_it_wrote(ea_fit, tmp_path, monkeypatch):
+    """A report's figures/ holding the user's files (any name, one shaped like a figure's, a
+    figure the user edited, a record forged to list them): drawing, keeping, dropping a figure
+    the page no longer shows and a figure that fails leave every one of them as it was. The
+    figure dropped is removed where it still holds what the report wrote (its PDF), kept
+    where the user edited it (its PNG). Issue 39 point 9 (the figure store it replaced
+    removed files it never wrote)."""
+    import hashlib
+    import json
+
+    monkeypatch.setattr(figures, "MAX_FIGURE_WORKERS", 1)
+    figdir = tmp_path / "figures"
+    figdir.mkdir()
+    mine = {figdir / "mine.png": b"\x89PNG the user's figure", figdir / "mine.pdf": b"%PDF the user's",
+            figdir / "fit_plot_ppc.png": b"\x89PNG shaped like a figure of the report",
+            figdir / "notes" / "fit_plot_trace.png": b"in a sub-folder", figdir / ".hidden.json": b"{}"}
+    for path, data in mine.items():
+        path.parent.mkdir(exist_ok=True)
+        path.write_bytes(data)
+
+    def jobs(*funcs):
+        return [{"fit": 0, "func": f, "args": (), "path": figdir / f"fit_{f}.png"} for f in funcs]
+
+    def unchanged():
+        return {p: p.read_bytes() for p in mine} == mine
+
+    assert figures.render_figures([ea_fit], jobs("plot_prior_posterior", "plot_trace"), figdir) == [None, None]
+    assert figures.render_figures([ea_fit], jobs("plot_prior_posterior", "plot_trace"), figdir) == [None, None]
+    assert unchanged()
+    trace = figdir / "fit_plot_trace.png"
+    trace.write_bytes(trace.read_bytes() + b"the user's annotation")  # now the user's
+    mine[trace] = trace.read_bytes()
+    doc = json.loads((figdir / ".figures.json").read_text())
+    record = doc["figures"]["fit_plot_prior_posterior.png"]
+    doc["figures"]["mine.png"] = doc["figures"]["fit_plot_ppc.png"] = record  # listed, but not what it wrote there
+    (figdir / ".figures.json").write_text(json.dumps(doc))
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no predictive check today")
+
+    monkeypatch.setattr(plots, "plot_ppc", broken)
+    errors = figures.render_figures([ea_fit], jobs("plot_prior_posterior", "plot_ppc"), figdir)
+    assert errors[0] is None and "no predictive check today" in errors[1]
+    assert unchanged(), "the user's files, and the figure the user edited, are as they were"
+    assert not (figdir / "fit_plot_trace.pdf").exists(), "the dropped figure's PDF, as written, is removed"
+    kept = json.loads((figdir / ".figures.json").read_text())["figures"]
+    assert set(kept) == {"fit_plot_prior_posterior.png"}
+    assert kept["fit_plot_prior_posterior.png"]["files"][".png"]["sha256"] == hashlib.sha256(
+        (figdir / "fit_plot_prior_posterior.png").read_bytes()).hexdigest()

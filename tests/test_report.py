@@ -4,7 +4,6 @@ table in it holds the saved fits' numbers."""
 import json
 import math
 import os
-import platform
 import re
 import sys
 import warnings
@@ -17,8 +16,9 @@ import pytest
 
 import skinfit
 from skinfit import plots
-from skinfit.report import html as report
 from skinfit.apps.cli import main
+from skinfit.report import html as report
+from skinfit.report.tables import break_at_underscores
 
 
 class _Page(HTMLParser):
@@ -143,16 +143,16 @@ def test_a_comparison_chart_is_kept_only_while_its_table_is_unchanged(written, e
     out = tmp_path / "again"
     shutil.copytree(index.parent, out)
     chart = out / "figures" / "comparison.png"
-    manifest = json.loads((out / "figures" / ".figures.json").read_text())
+    manifest = json.loads((out / "figures" / ".figures.json").read_text())["figures"]
     stamp = chart.stat().st_mtime_ns
     report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=comparison)
     assert chart.stat().st_mtime_ns == stamp
-    assert json.loads((out / "figures" / ".figures.json").read_text()) == manifest
+    assert json.loads((out / "figures" / ".figures.json").read_text())["figures"] == manifest
     changed = comparison.copy()
     changed.loc["electroadhesion_coulomb", "log_z"] = 490.5
     report.write_report([ea_fit, rival], out, title="Electroadhesion: test report", comparison=changed)
     assert chart.stat().st_mtime_ns != stamp
-    after = json.loads((out / "figures" / ".figures.json").read_text())
+    after = json.loads((out / "figures" / ".figures.json").read_text())["figures"]
     assert after["comparison.png"] != manifest["comparison.png"]
     assert {k: v for k, v in after.items() if k != "comparison.png"} == \
         {k: v for k, v in manifest.items() if k != "comparison.png"}
@@ -175,13 +175,16 @@ def test_figures_holds_only_the_figures_its_page_shows(written, ea_fit, monkeypa
     assert any("electroadhesion_coulomb" in n for n in gone) and {"comparison.png", "comparison.pdf"} <= gone
     (figdir / "mine.png").write_bytes(b"the user's own")
     (tmp_path / "outside.png").write_bytes(b"not the report's")
-    manifest = json.loads((figdir / ".figures.json").read_text())
-    manifest["../outside.png"] = manifest["mine.png.png"] = "damaged"
-    (figdir / ".figures.json").write_text(json.dumps(manifest))
+    doc = json.loads((figdir / ".figures.json").read_text())
+    record = doc["figures"]["comparison.png"]  # a record the report wrote, listed under names it did not write
+    doc["figures"]["../outside.png"] = doc["figures"]["mine.png"] = record
+    doc["figures"]["mine.png.png"] = "damaged"
+    (figdir / ".figures.json").write_text(json.dumps(doc))
     report.write_report([ea_fit], out, title="one fit")
     left = {p.name: p.stat().st_mtime_ns for p in figdir.iterdir() if not p.name.startswith(".")}
     assert left == {n: before[n] for n in ours} | {"mine.png": left["mine.png"]}
-    assert set(json.loads((figdir / ".figures.json").read_text())) == {n for n in ours if n.endswith(".png")}
+    assert (figdir / "mine.png").read_bytes() == b"the user's own"
+    assert set(json.loads((figdir / ".figures.json").read_text())["figures"]) == {n for n in ours if n.endswith(".png")}
     assert (tmp_path / "outside.png").read_bytes() == b"not the report's"
     page = (out / "index.html").read_text()
     assert all(f"figures/{n}" in page for n in ours) and "figures/mine.png" not in page
@@ -189,7 +192,7 @@ def test_figures_holds_only_the_figures_its_page_shows(written, ea_fit, monkeypa
     def broken(*args, **kwargs):
         raise RuntimeError("no trace today")
 
-    monkeypatch.setattr(report.plots, "plot_trace", broken)
+    monkeypatch.setattr(plots, "plot_trace", broken)
     report.write_report([ea_fit], out, title="one fit")
     trace = "electroadhesion__electroadhesion_synthetic_trace"
     assert not (figdir / f"{trace}.png").exists() and not (figdir / f"{trace}.pdf").exists()
@@ -208,15 +211,15 @@ def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_
     calls = []
 
     def analyses():
-        calls.append((forkable(), [p.name for p in multiprocessing.active_children()]))
+        calls.append([p.name for p in multiprocessing.active_children()])
         return {"comparison": comparison}
 
     out = tmp_path / "hooked"
-    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")  # every figure drawn, none copied from the store
+    fork = forkable()  # asked before: while the workers draw, their pool's thread runs here
     report.write_report([ea_fit, rival], out, title="hooked", analyses=analyses)
     # figure workers are forked only from a process without other threads (an earlier test's Dask
     # client leaves its threads here); otherwise the figures are drawn after, in this process
-    assert len(calls) == 1 and bool(calls[0][1]) == calls[0][0], calls
+    assert len(calls) == 1 and bool(calls[0]) == fork, (fork, calls)
     assert pd.read_csv(out / "comparison.csv", index_col=0).loc["electroadhesion", "log_z"] == 512.25
     assert "figures/comparison.png" in (out / "index.html").read_text()
     assert (out / "figures" / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -224,7 +227,7 @@ def test_analyses_given_to_a_report_run_while_its_figures_are_drawn(written, ea_
     with pytest.raises(TypeError, match="analyses.. returned contrast"):
         report.write_report([ea_fit], refused, analyses=lambda: {"contrast": {}})
     # the figures drawn by then are recorded, and the next report into the folder reuses them
-    drawn = {n for n in json.loads((refused / "figures" / ".figures.json").read_text())}
+    drawn = set(json.loads((refused / "figures" / ".figures.json").read_text())["figures"])
     assert drawn and all((refused / "figures" / n).exists() for n in drawn) and not (refused / "index.html").exists()
     stamps = {n: (refused / "figures" / n).stat().st_mtime_ns for n in drawn}
     report.write_report([ea_fit], refused)
@@ -348,16 +351,16 @@ import json, sys
 from skinfit.apps.cli import main
 
 assert main(["report", sys.argv[1], "--out", sys.argv[2]]) == 0
-heavy = ("arviz_stats", "arviz_plots", "matplotlib", "emcee", "nlopt", "scipy.stats")
+heavy = ("arviz_stats", "arviz_plots", "emcee", "nlopt")
 print(json.dumps(sorted(m for m in sys.modules if m in heavy or m.split(".")[0] in heavy)))
 """
 
 
 def test_a_report_with_nothing_to_draw_reads_the_stored_summary_and_imports_no_statistics(ea_fit, tmp_path):
     """``skinfit report`` of a saved fit into a folder that holds its figures: the summary read
-    from the fit file and nothing drawn, so no arviz_stats, scipy.stats, matplotlib or sampler
-    is imported; every table equals the first report's, whose summary was computed (the file
-    had none stored then)."""
+    from the fit file and nothing drawn, so no arviz_stats, ArviZ plotting or sampler is imported
+    (matplotlib and scipy.stats are, by the report's modules); every table equals the first
+    report's, whose summary was computed (the file had none stored then)."""
     import shutil
     import subprocess
     import sys
@@ -447,112 +450,6 @@ def test_figure_workers_end_when_the_report_process_is_killed(ea_fit, tmp_path):
     assert not survivors, f"figure workers {survivors} outlived their report process"
 
 
-_FROZEN = """
-import concurrent.futures, gc, json, os, sys
-from skinfit.report import html as report
-from skinfit.results.fit import load_fit
-
-os.cpu_count = lambda: 2  # forked figure workers even on one core
-frozen = []  # objects frozen when the workers are started
-
-class Recording(concurrent.futures.ProcessPoolExecutor):
-    def __init__(self, *args, **kwargs):
-        frozen.append(gc.get_freeze_count())
-        super().__init__(*args, **kwargs)
-
-concurrent.futures.ProcessPoolExecutor = Recording
-fit = load_fit(sys.argv[1])
-before = gc.get_freeze_count()
-report.write_report(fit, sys.argv[2] + "/a")
-after = gc.get_freeze_count()
-gc.freeze()
-mine = gc.get_freeze_count()
-report.write_report(fit, sys.argv[2] + "/b")
-print(json.dumps([frozen, before, after, mine, gc.get_freeze_count()]))
-"""
-
-
-@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(), reason="needs fork")
-def test_the_heap_frozen_for_the_figure_workers_is_put_back(ea_fit, tmp_path):
-    """The report freezes this process's objects while its forked workers draw, and unfreezes
-    them after, so nothing it held stays out of the collector's reach (a leak in a long
-    session); objects the caller had frozen itself stay frozen. In a new interpreter: one
-    without other threads, from which the report forks its workers (skinfit.inference.workers.forkable)."""
-    import subprocess
-
-    path = ea_fit.save(tmp_path / "fit.nc")
-    env = {**os.environ, "MPLBACKEND": "Agg", "SKINFIT_FIGURE_STORE": "off"}
-    out = subprocess.run([sys.executable, "-c", _FROZEN, str(path), str(tmp_path)], capture_output=True, text=True,
-                         env=env, timeout=600)
-    assert out.returncode == 0, out.stderr
-    frozen, before, after, mine, last = json.loads(out.stdout.strip().splitlines()[-1])
-    assert before == 0 and len(frozen) == 2 and frozen[0] > 10_000  # the workers were forked from a frozen heap
-    assert after == 0
-    assert last > 0.9 * mine > 0  # not unfrozen (a frozen object freed leaves the count)
-
-
-def test_a_figure_worker_leaves_no_figure_behind(ea_fit, tmp_path):
-    """A figure worker runs without automatic garbage collection (report._init_worker): each
-    figure's artists, held in reference cycles, are collected when the next figure starts, so
-    a worker drawing many figures holds at most the last one."""
-    import gc
-
-    from matplotlib.figure import Figure
-
-    jobs = report.fit_figure_jobs(ea_fit, 0, "fit", tmp_path)
-    assert len(jobs) >= 3
-    report._FITS, report._JOBS = [ea_fit], jobs
-    was_enabled = gc.isenabled()
-    gc.collect()
-    gc.disable()  # as in a worker
-    try:
-        for i in range(len(jobs)):
-            assert report._render_one(i) is None
-            assert len([o for o in gc.get_objects() if isinstance(o, Figure)]) == 1  # even unreachable ones count
-    finally:
-        report._FITS, report._JOBS = [], []
-        if was_enabled:
-            gc.enable()
-    assert all(job["path"].exists() for job in jobs)
-
-
-_REDRAW = """
-import gc, os, resource, sys
-from pathlib import Path
-from skinfit import plots
-from skinfit.report import html as report
-from skinfit.results.fit import load_fit
-
-if sys.argv[2] == "worker":
-    report._init_worker(os.getppid())  # as a figure worker starts
-else:
-    gc.disable()  # as in a worker
-fit = load_fit(sys.argv[1])
-for k in range(3):
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    report._write_png(plots.plot_trace(fit), Path(sys.argv[1]).with_name(f"trace{k}.png"))
-    gc.collect(1)
-print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
-"""
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
-                    reason="glibc's mallopt only: elsewhere a figure worker's memory is left as it is")
-def test_a_figure_worker_keeps_the_memory_figures_free(ea_fit, tmp_path):
-    """A figure worker's heap keeps what a figure frees (report._init_worker sets
-    _keep_freed_memory): drawing the same figure a third time faults in almost no new pages,
-    where by default the memory of its bitmaps is returned to the system and every page of it
-    faulted in and zeroed again."""
-    import subprocess
-
-    path = ea_fit.save(tmp_path / "fit.nc")
-    faults = {}
-    for mode in ("default", "worker"):
-        faults[mode] = int(subprocess.run([sys.executable, "-c", _REDRAW, str(path), mode], capture_output=True,
-                                          text=True, env={**os.environ, "MPLBACKEND": "Agg"}, check=True).stdout)
-    assert faults["worker"] < 300 and faults["default"] > 5 * faults["worker"], faults
-
-
 def test_table_names_break_at_their_underscores_and_stay_escaped(written):
     """A table cell gets a line-break opportunity after each underscore, so a narrow column
     breaks ``electroadhesion_coulomb`` between its words (the cell's text is unchanged for a
@@ -562,7 +459,7 @@ def test_table_names_break_at_their_underscores_and_stay_escaped(written):
     assert '<td class="text">electroadhesion_<wbr>coulomb</td>' in html
     assert ">log_<wbr>z_<wbr>se</th>" in html
     assert "electroadhesion_coulomb" in _frame(_parse(index).tables[("comparison", "comparison.csv")]).index
-    assert str(report._break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
+    assert str(break_at_underscores("a<b>_c&d")) == "a&lt;b&gt;_<wbr>c&amp;d"
 
 
 def test_a_report_never_overwrites_a_folder_of_the_users_files(ea_fit, tmp_path, no_figures, capsys):
@@ -661,7 +558,6 @@ def test_fork_from_a_threaded_process_never_happens_figures_drawn_here(ea_fit, t
     import threading
 
     monkeypatch.setattr(os, "cpu_count", lambda: 2)  # two figure workers, were fork allowed
-    monkeypatch.setenv("SKINFIT_FIGURE_STORE", "off")  # every figure drawn
     stop = threading.Event()
     other = threading.Thread(target=stop.wait, daemon=True)
     other.start()

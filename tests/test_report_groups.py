@@ -14,6 +14,7 @@ import pytest
 import skinfit
 from skinfit.report import html as report
 from skinfit.report.groups import contrast_section, group_analyses, subject_label
+from skinfit.report.tables import level_names, ranking_note
 
 SUBJECTS = ("S01", "S02", "S03")
 
@@ -94,16 +95,16 @@ def test_report_on_subjects_shows_tables_population_and_contrasts(subject_fits, 
 
 
 def test_a_parameter_indexed_by_a_condition_names_it(subject_fits):
-    names = report.level_names(subject_fits["S01"])
+    names = level_names(subject_fits["S01"])
     assert names["gamma[0]"] == "gamma[actuation_force=0 N]"
     assert names["gamma[30]"] == "gamma[actuation_force=30 N]"
 
 
 def test_the_report_says_when_evidence_and_loo_rank_models_differently():
     agree = pd.DataFrame({"model": ["a", "b"], "log_z": [-1.0, -5.0], "elpd_loo": [3.0, 1.0]})
-    assert report.ranking_note(agree) is None
+    assert ranking_note(agree) is None
     disagree = pd.DataFrame({"model": ["a", "b"], "log_z": [-1.0, -5.0], "elpd_loo": [1.0, 3.0]})
-    note = report.ranking_note(disagree)
+    note = ranking_note(disagree)
     assert "by log Z a > b" in note and "by ELPD (LOO) b > a" in note and "prior" in note
 
 

@@ -4,18 +4,16 @@ variants, compared by evidence and LOO, and written up as one static report.
 Fits run in parallel worker processes (``--jobs``, default one per core); each fit's seed is
 derived from the demo seed and the (dataset, model) pair, so results do not depend on the
 number of workers or the order in which fits finish. A fit already saved under ``--out``
-(same seed) is reused, so an interrupted demo continues where it stopped. The same workers
-draw each new fit's report figures into the figure store (:mod:`skinfit.report.figure_store`) while
-this process compares the fits and runs the population; the report then copies them.
+(same seed) is reused, so an interrupted demo continues where it stopped. The report's figures
+are drawn while this process compares the fits and runs the population; a report folder that
+already holds a figure drawn from the same content keeps it.
 """
 
 import json
 import os
 import time
 import zlib
-from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -190,27 +188,20 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
         echo(f"  {p['dataset']:<28} {p['model'] + (' ' + p['group'] if p.get('group') else ''):<30} "
              f"seed {p['seed']}{extra}")
     jobs = jobs or min(len(todo), os.cpu_count() or 1) or 1
-    with ExitStack() as stack:
-        drawing = []  # each new fit's report figures, drawn into the figure store by the fit workers
-        if todo:    # while this process loads the fits, compares them and runs the population
-            # workers started by spawn or forkserver (macOS; Linux from Python 3.14) inherit no
-            # --path: given it, they find the cards this process planned with (checked: _run_one)
-            pool = stack.enter_context(ProcessPoolExecutor(max_workers=jobs, initializer=set_search_path,
-                                                           initargs=(explicit_search_path(),)))
+    if todo:
+        # workers started by spawn or forkserver (macOS; Linux from Python 3.14) inherit no
+        # --path: given it, they find the cards this process planned with (checked: _run_one)
+        with ProcessPoolExecutor(max_workers=jobs, initializer=set_search_path,
+                                 initargs=(explicit_search_path(),)) as pool:
             futures = {pool.submit(_run_one, p, path): (p, path) for p, path in todo}
-            n_of_model = Counter(p["model"] for p in plan)
             for fut in as_completed(futures):
                 r = fut.result()
                 flag = "converged" if r["converged"] else "NOT CONVERGED (see the report)"
                 echo(f"  done {r['dataset']} / {r['model']}: {r['seconds']:.1f} s, {flag}")
-                p, path = futures[fut]
-                drawing.append(pool.submit(_draw_one, path, n_of_model[p["model"]]))
-        fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
-                f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
-        for fut in drawing:  # a figure not drawn here (even a lost worker) is drawn by the report
-            fut.exception()
+    fits = {f"{p['dataset']} / {p['model']}" + (f" / {p['group']}" if p.get("group") else ""):
+            f if f is not None else load_fit(path) for p, path, f in zip(plan, paths, reused)}
 
-    def analyses():  # while the report draws the figures the store does not hold
+    def analyses():  # while the report draws the figures its folder does not hold
         comparisons, populations, contrasts = _analyses(fits, plan, out, seed, echo)
         return {"comparison": comparisons or None, "populations": populations, "contrasts": contrasts}
 
@@ -218,13 +209,6 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     (Path(report) / "demo_plan.json").write_text(json.dumps(plan, indent=1) + "\n")
     echo(f"\nreport: {index}")
     return index
-
-
-def _draw_one(path, n_of_model):
-    """A new fit's report figures into the figure store (top level: runs in a fit worker); a
-    figure that fails is left for the report, which draws it again and lists the error."""
-    os.environ.setdefault("MPLBACKEND", "Agg")
-    return store_fit_figures(path, n_of_model)
 
 
 def _analyses(fits, plan, out, seed, echo):

@@ -82,8 +82,7 @@ def user_root() -> Path:
 
 
 def user_cache_root() -> Path:
-    """The per-user cache folder (e.g. ``~/.cache/skinfit`` on Linux): the figure store, the
-    figures' font."""
+    """The per-user cache folder (e.g. ``~/.cache/skinfit`` on Linux): the figures' font."""
     import platformdirs
 
     return Path(platformdirs.user_cache_dir("skinfit", appauthor=False))
@@ -228,7 +227,7 @@ def package_version(name: str) -> str:
 @lru_cache(maxsize=None)
 def code_hash(libraries: tuple[str, ...] = ()) -> str:
     """sha256 of skinfit's source (:func:`source_hash`) and of the installed versions of
-    ``libraries``: keys results kept by content (the figure store, the population cache), so
+    ``libraries``: keys results kept by content (a report's figures, the population cache), so
     that other code never reuses them."""
     doc = {"source": source_hash(), "versions": {name: package_version(name) for name in libraries}}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()

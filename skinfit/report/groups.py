@@ -5,21 +5,31 @@ in the data, e.g. ``S01`` of ``subject=S01``); :func:`population_section` shows 
 result (hyper-parameters, shrunk beside separate estimates) through :class:`PopulationView`,
 the one adapter that knows the population result's accessors; :func:`contrast_section`
 shows contrast tables (:mod:`skinfit.analysis.contrasts`) with each pair's probability of direction.
-Each section returns plain dicts of tables and figure jobs for :mod:`skinfit.report.html`.
+:func:`across_fits` puts them together for each model with several fits in a report, with a
+forest plot of each parameter across the fits. Each section returns plain dicts of tables and
+figure jobs for :mod:`skinfit.report.html`.
 """
 
 import re
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from skinfit.report.checks import NOT_CONVERGED_ATTR
+from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
+from skinfit.analysis.population.inputs import subject_digest
+from skinfit.analysis.population.result import DERIVED
+from skinfit.analysis.population.population import population as fit_population
+from skinfit.errors import InputError
+from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
+from skinfit.report.tables import cells, file_part, not_applicable, unique_name
 from skinfit.results.run_labels import run_labels
 
 __all__ = ["subject_label", "row_labels", "PopulationView", "subjects_section", "population_section", "contrast_section",
-           "population_parameters", "group_analyses", "hyperprior_table", "sampler_text"]
+           "population_parameters", "group_analyses", "hyperprior_table", "sampler_text", "population_for",
+           "across_fits"]
 
 
 def subject_label(fit):
@@ -64,8 +74,7 @@ class PopulationView:
     def hyper_table(self):
         """Per parameter and quantity (population mean, sd, median; mu, tau in the sampling
         coordinate; correlations): estimate (median) and 95% interval. Computed once per view
-        (with the R-hat and ESS of every hyper-parameter, ~50 ms): the report reads it per
-        parameter."""
+        (with the R-hat and ESS of every hyper-parameter): the report reads it per parameter."""
         if self._hyper is None:
             self._hyper = self.result.summary()
         return self._hyper.copy()
@@ -281,12 +290,6 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
 
     Returns ``(populations {model id: result}, contrasts {title: DataFrame})``.
     """
-    import warnings
-
-    from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
-    from skinfit.errors import InputError
-    from skinfit.report.html import file_part
-
     by_model = {}
     for key, f in fits.items():
         base = re.sub(r"\[.*\]$", "", f.dataset_id)
@@ -309,8 +312,6 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
             continue
         if len(group) < min_fits:
             continue
-        from skinfit.analysis.population.inputs import subject_digest
-
         digests = sorted(subject_digest(f) for f in group.values())
         mine = [r for r in saved if r.model_id == model_id]
         match = next((r for r in mine if sorted(r.inputs.values()) == digests), None)
@@ -319,13 +320,11 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
             populations[model_id] = match
         else:
             try:
-                from skinfit.analysis.population.population import population
-
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     stem = file_part(f"{model_id}__{'__'.join(bases)}")
                     cache = None if cache_dir is None else Path(cache_dir) / f"population_{stem}.npz"
-                    result = population(group, names, rng=seed, cache=cache)
+                    result = fit_population(group, names, rng=seed, cache=cache)
                 notes = [_other_fits(r, digests, base) for r in mine]
                 for note in notes:
                     if echo:
@@ -353,3 +352,80 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
             table.attrs[NOT_CONVERGED_ATTR] = [] if f.converged else [f"{label} on {f.dataset_id}"]
             contrasts[f"{label} on {f.dataset_id}: between conditions"] = table
     return populations, contrasts
+
+
+def population_for(population, model_id, parameter):
+    """The population distribution of ``parameter`` given to a report (``write_report``'s
+    ``population``: {parameter: distribution}, also keyed by model id first, or a DataFrame
+    indexed by parameter) for the fits of ``model_id``; None when it has none."""
+    if population is None:
+        return None
+    if isinstance(population, pd.DataFrame):
+        return population.loc[parameter].to_dict() if parameter in population.index else None
+    if model_id in population and isinstance(population[model_id], dict):
+        return population[model_id].get(parameter)
+    return population.get(parameter)
+
+
+def across_fits(items, figdir, population, populations, out_dir, jobs):
+    """Per model with several fits (subjects, conditions): a table and a forest plot of each
+    parameter across the fits, labelled by subject as written in the data, and the model's
+    population result when given. The forest plots are appended to ``jobs`` (drawn with the
+    fits' own figures by :func:`skinfit.report.figures.render_figures`)."""
+    by_model = {}
+    index = {key: i for i, (key, _) in enumerate(items)}
+    for key, fit in items:
+        by_model.setdefault(fit.model_id, []).append((key, fit))
+    out, taken = [], set()
+    for model_id, group in by_model.items():
+        if len(group) < 2:
+            continue
+        safe = unique_name(file_part(model_id), taken)
+        subj = subjects_section(dict(group))
+        labelled = {subj["labels"][k]: f for k, f in group}
+        if len(labelled) < len(group):  # the same subject label twice: keep the unique keys
+            labelled = dict(group)
+        tables = []
+        for pname, table in subj["tables"].items():
+            stem = f"subjects_{safe}_{file_part(pname)}"
+            table.to_csv(out_dir / f"{stem}.csv")
+            tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": cells(table, "subject")})
+        pop_result = populations.get(model_id)
+        pop_info = population_section(pop_result) if pop_result is not None else None
+        if pop_info is not None:
+            pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
+            if pop_info["effects"] is not None:
+                pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
+            hyper = pop_info["hyper"].reset_index().set_index("parameter")
+            derived = hyper["quantity"].isin(DERIVED)  # computed from mu and tau
+            pop_tables = {"hyper": cells(hyper, "parameter",
+                                         not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),
+                          "csv": f"population_{safe}.csv",
+                          "subjects": [{"parameter": k, "table": cells(v, "subject")}
+                                       for k, v in pop_info["subjects"].items()],
+                          "hyperpriors": cells(pop_info["hyperprior_table"], "parameter"),
+                          "effects": None if pop_info["effects"] is None else
+                          cells(pop_info["effects"].set_index(pop_info["effects"].columns[0]),
+                                pop_info["effects"].columns[0]),
+                          "warnings": pop_info["warnings"], "origin": pop_info["origin"],
+                          "issues": population_issues(pop_result), "converged": bool(pop_result.converged),
+                          "correlation": pop_info["correlation"], "sampler": pop_info["sampler_text"]}
+        else:
+            pop_tables = None
+        figures = []
+        entry = {"model_id": model_id, "fits": list(labelled), "figures": figures, "tables": tables,
+                 "population": pop_tables, "id": f"across-{len(out) + 1}"}
+        labels = {label: index[k] for label, (k, _) in zip(labelled, group)}
+        for pname in group[0][1].group("posterior").data_vars:
+            path = figdir / f"across_{safe}_{pname}.png"
+            pop = population_for(population, model_id, pname)
+            if pop is None and pop_info is not None:
+                pop = pop_info["intervals"].get(pname)
+            caption = f"{pname} across {len(group)} fits" + (" with the population distribution" if pop is not None
+                                                              else "")
+            figures.append({"file": f"figures/{path.name}", "caption": caption,
+                            "alt": f"forest plot of {pname} across the fits of {model_id}"})
+            jobs.append({"fit": labels, "func": "plot_forest", "args": (pname,), "kwargs": {"population": pop},
+                         "path": path, "entry": figures[-1], "across": entry})
+        out.append(entry)
+    return out

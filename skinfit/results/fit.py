@@ -535,7 +535,7 @@ def _misfit_line(fit):
             + (f"{pk['count']} rows" if pk else "- rows (not computed)"))
 
 
-def _wall_time_text(t, pending=False):
+def wall_time_text(t, pending=False):
     """The timings of a fit (see :func:`fit`) in one line, as ``skinfit fit`` and the report's
     diagnostics show them; the deferred groups' time once computed ('deferred' while
     :attr:`Fit.pending`; nothing for a fit saved before they were deferred, whose ``tree_s``
@@ -859,7 +859,7 @@ class Fit:
                  + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
                  + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
                  f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
-                 f"wall time: {_wall_time_text(t, self.pending)}",
+                 f"wall time: {wall_time_text(t, self.pending)}",
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
                  + (f" ({self.attrs.get('support_condition')})" if c["outside_support"] else ""),

@@ -12,9 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from skinfit.inference.checkpoint import replace_atomic
-from skinfit.io.models import load_model
-from skinfit.io.paths import code_hash, locate, shipped_root
-from skinfit.io.registry import resolve
+from skinfit.io.paths import code_hash
+from skinfit.io.shipped import shipped_physics
 from skinfit.results.fit import _plain_json
 from skinfit.analysis.population.result import PopulationResult
 
@@ -23,23 +22,9 @@ __all__ = ["cacheable", "cache_key", "write_cache", "read_cache"]
 
 def cacheable(fit):
     """True when ``fit`` is of a shipped model card, unchanged since the fit, whose functions are
-    all skinfit's own: then a population computed from it follows from its content and
-    skinfit's source (:func:`skinfit.io.paths.code_hash`), and may be kept (a user's model code
-    is not in the cache key)."""
-    try:
-        model = load_model(fit.model_id)
-        shipped = shipped_root()
-        if shipped is None or model.sha256 != fit.attrs.get("model_sha256"):
-            return False
-        if Path(locate("models", fit.model_id)).resolve().parent != (Path(shipped) / "models").resolve():
-            return False  # a card of the user's that shadows a shipped one
-        refs = [("forward", model.forward_ref), *(("shear", r) for r in model.shear.values()),
-                *(("shift", r) for r in model.shift.values())]
-        if model.derived.get("function"):
-            refs.append(("derived", model.derived["function"]))
-        return all(resolve(role, ref, model.path).__module__.startswith("skinfit.physics.") for role, ref in refs)
-    except Exception:  # noqa: BLE001 - a model that cannot be checked is simply not kept
-        return False
+    all skinfit's own (:func:`skinfit.io.shipped.shipped_physics`): a population computed from
+    it then follows from its content and skinfit's source, and may be kept."""
+    return shipped_physics(fit.model_id, fit.attrs.get("model_sha256"))
 
 
 def cache_key(fits, settings):

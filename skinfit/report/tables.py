@@ -1,0 +1,142 @@
+"""The report's tables as text: cells, file names, Markdown, and the sentences read beside them.
+
+A table is shown as ``{columns, rows, text}`` of formatted cells (:func:`cells`), the same in
+the HTML page and in ``summary.md`` (:func:`markdown`); its CSV is written by pandas beside it.
+"""
+
+import math
+import re
+
+import numpy as np
+import pandas as pd
+from markupsafe import Markup, escape
+
+__all__ = ["file_part", "unique_name", "cell_text", "cells", "not_applicable", "markdown", "level_names",
+           "base_name", "defang", "break_at_underscores", "ranking_note"]
+
+
+def file_part(text):
+    """``text`` with every run of characters other than letters, digits, ``_``, ``.`` and ``-``
+    replaced by ``_``: safe inside a file name on every platform."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
+
+
+def unique_name(base, taken):
+    """``base``, or ``base_2``, ``base_3``... the first not in ``taken`` (which it joins): one
+    file name per fit or table of a report, also for names that differ only in characters
+    :func:`file_part` replaces (``d[subject=Zoë]``, ``d[subject=Zoé]``; model ids ``a+b``, ``a_b``)."""
+    key, k = base, 2
+    while key in taken:
+        key, k = f"{base}_{k}", k + 1
+    taken.add(key)
+    return key
+
+
+def cell_text(value, na=False):
+    """Table cell text: 6 significant digits for floats (enough to check against the CSV); a NaN
+    is ``n/a`` in a cell that has no value by construction (``na``), else ``nan``."""
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return ("n/a" if na else "nan") if math.isnan(value) else f"{value:.6g}"
+    return "" if value is None else str(value)
+
+
+def cells(df, index_name, na=None):
+    """A DataFrame as {columns, rows, text} of formatted cells, the index as first column;
+    ``text[k]`` is True for a column of words (left-aligned and wrapped in the page). ``na``:
+    a boolean array (rows, columns) of the cells that have no value by construction (see
+    :func:`not_applicable`), shown as ``n/a`` rather than ``nan`` (a number not computed)."""
+    na = np.zeros(df.shape, dtype=bool) if na is None else np.asarray(na, dtype=bool)
+    return {"columns": [index_name] + [str(c) for c in df.columns],
+            "rows": [[cell_text(i)] + [cell_text(v, a) for v, a in zip(row, flags)]
+                     for i, row, flags in zip(df.index, df.itertuples(index=False), na)],
+            "text": [True] + [not (pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c]))
+                              for c in df.columns]}
+
+
+def not_applicable(df, columns, rows=None):
+    """(rows, columns) mask of ``df``: True in ``columns`` on the rows where ``rows`` (a boolean
+    array; every row when None) holds, the cells that have no value by construction: a derived
+    quantity's MAP, tau and contraction (it has no prior), a population's derived rows' R-hat
+    and ESS (those of ``mu`` and ``tau``, from which they are computed, are on their own rows),
+    a contrast's ratio A / B where B's draws change sign."""
+    rows = np.ones(len(df), dtype=bool) if rows is None else np.asarray(rows, dtype=bool)
+    return rows[:, None] & np.isin(np.asarray(df.columns, dtype=object), columns)[None, :]
+
+
+def markdown(shown):
+    """A table of :func:`cells` as a Markdown table (``|`` in a cell escaped)."""
+    def esc(text):
+        return text.replace("|", "\\|")
+
+    lines = ["| " + " | ".join(esc(c) for c in shown["columns"]) + " |",
+             "|" + "|".join("---" for _ in shown["columns"]) + "|"]
+    lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in shown["rows"]]
+    return "\n".join(lines)
+
+
+def level_names(fit):
+    """Summary row name -> the same name with its condition spelled out, for every parameter or
+    derived quantity indexed by a condition: ``gamma[0.5]`` -> ``gamma[actuation_force=0.5 N]``,
+    ``beta_h[M10]`` -> ``beta_h[material=M10]`` (levels in the units the data came in)."""
+    units = fit.attr("units")
+    out = {}
+    for group in ("posterior", "derived"):
+        try:
+            ds = fit.group(group)
+        except (KeyError, ValueError):
+            continue
+        for var in ds.data_vars:
+            dims = [d for d in ds[var].dims if d not in ("chain", "draw")]
+            if len(dims) != 1:
+                continue
+            cols = dims[0].split(",")
+            for level in ds[dims[0]].values:
+                parts = str(level).split(",")
+                if len(parts) != len(cols):
+                    continue
+                named = ", ".join(f"{c}={v}" + (f" {units[c]}" if units.get(c) not in (None, "1", "-") else "")
+                                  for c, v in zip(cols, parts))
+                out[f"{var}[{level}]"] = f"{var}[{named}]"
+    return out
+
+
+def base_name(slot_name):
+    """A summary row's parameter: ``gamma`` of ``gamma[0.5]``."""
+    return slot_name.split("[", 1)[0]
+
+
+def defang(text):
+    """Embedded texts (cards, prior files) keep their words, not clickable network addresses."""
+    return re.sub(r"\b(https?|ftp)://", r"\1[:]//", text)
+
+
+def break_at_underscores(value):
+    """A table cell's text, escaped, with a line-break opportunity (``<wbr>``) after each
+    underscore: a narrow column breaks ``contact_area_no_levitation`` between its words, not
+    inside one."""
+    return escape(value).replace("_", Markup("_<wbr>"))
+
+
+def ranking_note(table):
+    """A sentence when log evidence and LOO rank the models differently, else None.
+
+    ``table`` as :func:`skinfit.compare` returns it (columns ``model`` or index, ``log_z``,
+    ``elpd_loo``)."""
+    if not {"log_z", "elpd_loo"} <= set(table.columns):
+        return None
+    t = table.set_index("model") if "model" in table.columns else table
+    by_z = list(t["log_z"].sort_values(ascending=False).index)
+    by_loo = list(t["elpd_loo"].sort_values(ascending=False).index)
+    if by_z == by_loo:
+        return None
+    return (f"Evidence and LOO rank these models differently: by log Z {' > '.join(map(str, by_z))}; "
+            f"by ELPD (LOO) {' > '.join(map(str, by_loo))}. The evidence Z = p(data | model) averages the "
+            "likelihood over the prior, so it rewards a model whose priors put mass where the data are and "
+            "penalises wide priors; LOO's ELPD scores how well the fitted posterior predicts each left-out row, "
+            "whatever the prior. Where they disagree, the winner by evidence is favoured as a whole-model "
+            "explanation under these priors, the winner by LOO as a predictor of new rows like these; "
+            "check the standard errors before reading either difference.")
