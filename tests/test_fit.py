@@ -12,6 +12,7 @@ import pytest
 from scipy import optimize, stats
 
 import skinfit
+from skinfit import integrity
 from skinfit.errors import InputError
 from pointwise import check_pointwise_groups
 from skinfit.inference.optimize import find_map
@@ -99,6 +100,7 @@ def test_a_fit_whose_summary_fails_is_saved_without_it(ea_fit, tmp_path, monkeyp
     path = ea_fit.save(tmp_path / "fit.nc")
     tree = xr.open_datatree(path).load()
     del tree.attrs["summary"]
+    integrity.stamp(tree)  # the checksums of the edited content: a file another writer left, not damage
     tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
     fit_module = importlib.import_module("skinfit.results.fit")
 
@@ -122,6 +124,7 @@ def test_a_stored_summary_is_never_shown_for_other_draws_or_records(ea_fit, tmp_
     stored = tree.attrs["summary"]
     tree["posterior"]["alpha"].values[...] *= 2.0
     tree.attrs["summary"] = stored  # the old table kept beside new draws
+    integrity.stamp(tree)  # an edit by another writer (its content checksummed), not damage
     tree.to_netcdf(tmp_path / "edited.nc", engine="h5netcdf")
     edited = skinfit.load_fit(tmp_path / "edited.nc")
     assert not edited.summary_stored

@@ -8,8 +8,7 @@ step of every command is replaced by a stand-in that raises ``_WorkStarted``.  P
 exit status is 0, 1, 2 or 3 (or the work started), stderr holds no traceback and at most one
 ``error:`` line, the last; a value that can never be valid for its kind of argument (a number,
 a folder to write, a file to read) is refused before any work.  A few cases run as a real
-subprocess.  Failures in modules other engineers are fixing in parallel are marked xfail and
-named (issue 39, point 14) in ``KNOWN``.
+subprocess.
 """
 
 import argparse
@@ -144,10 +143,6 @@ def _never_valid(kind, value):
     return False
 
 
-#: (command, argument, value) failing in modules other engineers fix in parallel: xfail, named
-KNOWN = {}
-
-
 def _argv(cmd, key, value, root, out):
     argv = list(_base(cmd, root, out))
     if key == "--path":
@@ -218,9 +213,6 @@ def test_class_cli_every_option_hostile_value_one_line_error_or_valid(stand_ins,
     root = stand_ins
     kind = _kind(action)
     value_at = str(root / value[1:]) if value.startswith("@") else value
-    known = KNOWN.get((cmd, key, value))
-    if known:
-        pytest.xfail(known)
     with tempfile.TemporaryDirectory(dir=root) as tmp:
         argv = _argv(cmd, key, value_at, root, Path(tmp) / "out")
         code, err = _run(argv)
@@ -260,23 +252,17 @@ def test_class_cli_hostile_values_found_by_the_fuzz(stand_ins, argv, match):
     assert "Traceback" not in err and re.search(match, err.strip().splitlines()[-1]), err
 
 
-def _gap(reason):
-    return pytest.mark.xfail(reason=f"issue 39, {reason}: owned by another engineer, being fixed in parallel",
-                             strict=False)
-
-
 @pytest.mark.parametrize("argv, option", [
     pytest.param(["campaign", "@camp.toml", "--scheduler", "banana"], "--scheduler"),
     pytest.param(["design", MODEL, "--candidates", "@grid.toml", "--n", "1000000"], "--n"),
     pytest.param(["design", MODEL, "--candidates", "@grid.toml", "--discriminate", "/nonexistent/x"], "nonexistent"),
-    pytest.param(["population", "@by", "--params", ","], "--params",
-                 marks=_gap("point 14, population's inputs: --params ',' (no name) is taken for every parameter")),
+    pytest.param(["population", "@by", "--params", ","], "--params"),
     pytest.param(["--path", "/nonexistent/x", "models"], "/nonexistent/x"),
     pytest.param(["--path", "/dev/null", "models"], "/dev/null"),
 ], ids=lambda v: " ".join(v) if isinstance(v, list) else None)
-def test_class_cli_hostile_values_owned_by_other_points_refused_before_work(stand_ins, argv, option):
-    """Found by the generated test, in modules other engineers change in parallel: listed so
-    the lead sees them pass (XPASS) once their fixes are merged."""
+def test_class_cli_hostile_values_refused_before_work(stand_ins, argv, option):
+    """Hostile values the generated test found in design, population, campaign and the search
+    path: each refused in one line before any work."""
     argv = [str(stand_ins / a[1:]) if a.startswith("@") else a for a in argv]
     code, err = _run(argv)
     assert code == 2 and option in err, (code, err)

@@ -275,7 +275,7 @@ def test_class_bad_arguments_an_out_that_is_a_file_or_the_run_itself(run3, tmp_p
     run, _ = run3
     (tmp_path / "afile").write_text("mine")
     line = _one_line_error(capsys, main(["population", str(run), "--out", str(tmp_path / "afile")]))
-    assert "is a file: --out names a folder" in line and (tmp_path / "afile").read_text() == "mine"
+    assert "is a file: --out names the folder" in line and (tmp_path / "afile").read_text() == "mine"
     line = _one_line_error(capsys, main(["population", str(run), "--out", str(run)]))
     assert "is the run's own folder" in line
 
@@ -320,7 +320,7 @@ def test_class_bad_arguments_population_cache_fits_and_results(run3, tmp_path):
     with pytest.raises(InputError, match="no such population file"):
         load_population(tmp_path / "none.nc")
     (tmp_path / "junk.nc").write_bytes(b"\0" * 64)
-    with pytest.raises(InputError, match="not a readable population result"):
+    with pytest.raises(InputError, match="not a readable skinfit population result"):
         load_population(tmp_path / "junk.nc")
 
 
@@ -330,7 +330,7 @@ def test_class_bad_arguments_contrasts_and_effects_get_one_line(run3, cli_mu):
     for kwargs, expected in [({"prob": 1.5}, "prob: expected an interval probability"),
                              ({"prob": 0}, "prob: expected an interval probability"),
                              ({"rng": -3}, "rng: expected a seed >= 0"),
-                             ({"parameter": 7}, "parameter: expected a parameter name")]:
+                             ({"parameter": 7}, "parameter: expected the name of a sampled parameter")]:
         with pytest.raises(InputError, match=re.escape(expected)):
             fit_contrasts(fits, **{"parameter": "mu", **kwargs})
     with pytest.raises(InputError, match="expected a mapping label -> Fit or a `fit --by` run folder"):
@@ -380,10 +380,10 @@ def test_class_non_convergence_names_the_undetermined_hyper_parameters_and_stric
     assert "NOT converged" in captured.err and "--strict" not in captured.err
     assert (out / "population.nc").exists()  # the result is kept
     # without --strict: exit 0, still said on stderr
-    assert main(["population", str(run), "--seed", "1", "--max-sweeps", "350", "--out", str(out)]) == 0
+    assert main(["population", str(run), "--seed", "1", "--max-sweeps", "350", "--out", str(out), "--overwrite"]) == 0
     assert "NOT converged" in capsys.readouterr().err
     # the advice runs: mu alone, every subject's data determine it
-    assert main(["population", str(run), "--seed", "1", "--params", "mu", "--strict", "--out", str(out)]) == 0
+    assert main(["population", str(run), "--seed", "1", "--params", "mu", "--strict", "--out", str(out), "--overwrite"]) == 0
     assert "converged: yes" in capsys.readouterr().out
 
 

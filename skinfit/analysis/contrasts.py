@@ -17,17 +17,18 @@ draws with A > B).
 from __future__ import annotations
 
 import itertools
+import os
 from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
 
-from skinfit.io.arguments import check_number, shown
+from skinfit.io.arguments import shown
 from skinfit.errors import InputError, InputTypeError
 from skinfit.results.fit import Fit, _slot_values, as_fit, as_generator
 from skinfit.analysis.groups import load_groups
 from skinfit.analysis.population.inputs import subject_digest
-from skinfit.analysis.population.checks import check_subjects
+from skinfit.analysis.population.checks import check_prob, check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
 
@@ -84,10 +85,10 @@ def _table(named, prob):
 
 
 def _check_parameter(parameter, prob, where):
+    check_prob(prob, where)
     if not isinstance(parameter, str):
         raise InputTypeError(where, f"expected the name of a sampled parameter (got {shown(parameter)})",
                              field="parameter")
-    check_number(prob, where, "prob", lo=0.0, hi=1.0, hi_open=False)
 
 
 def level_contrasts(fit: Fit, parameter: str, prob: float = 0.95) -> pd.DataFrame:
@@ -124,12 +125,13 @@ def fit_contrasts(fits: Mapping[str, Fit], parameter: str, rng: int | np.random.
         if rng is not None:
             raise InputError("fit_contrasts", f"expected a seed >= 0, None or a numpy Generator (got {rng!r})",
                              field="rng")
-    if not isinstance(parameter, str):
-        raise InputError("fit_contrasts", f"expected a parameter name (got {parameter!r})", field="parameter")
     rng = as_generator(rng)
     _check_parameter(parameter, prob, "fit_contrasts")
-    if not isinstance(fits, Mapping):
+    if isinstance(fits, (str, os.PathLike)):
         fits = load_groups(fits)
+    if not isinstance(fits, Mapping):
+        raise InputTypeError("fit_contrasts", f"expected a mapping label -> Fit or a `fit --by` run folder (got "
+                             f"{type(fits).__name__})", field="fits")
     fits = {label: f if callable(getattr(f, "attr", None)) and callable(getattr(f, "group", None))  # a Fit or
             else as_fit(f, "fit_contrasts", f"fits[{label!r}]") for label, f in fits.items()}  # population.DrawsFit
     if len(fits) < 2:

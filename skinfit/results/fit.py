@@ -170,7 +170,7 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
                     checkpoint_every=checkpoint_every)
     n_global = check_count(n_global, "fit", "n_global")
-    n_local = check_count(n_local, "fit", "n_local", lo=0, hi=n_global)
+    n_local = min(check_count(n_local, "fit", "n_local", lo=0), n_global)  # local searches from the best prior draws: at most all of them
     n_prior_draws = check_count(n_prior_draws, "fit", "n_prior_draws")
     progress, strict, resume = (check_flag(v, "fit", k) for k, v in
                                 (("progress", progress), ("strict", strict), ("resume", resume)))

@@ -82,8 +82,8 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
         noise_kinds = dict(post.noise)
     else:
         if not isinstance(fit_or_model, (Model, str, os.PathLike)):
-            raise InputTypeError("design", f"expected a Fit, a Model or a model id (got "
-                                 f"{type(fit_or_model).__name__})", field="fit_or_model")
+            raise InputTypeError("fit_or_model", f"expected a Fit, a Model or a model id (got "
+                                 f"{type(fit_or_model).__name__})")
         model = fit_or_model if isinstance(fit_or_model, Model) else load_model(fit_or_model)
         priors = load_priors(model.id)
         noise_kinds = {o.name: o.noise for o in model.observables}

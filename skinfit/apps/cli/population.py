@@ -74,18 +74,29 @@ def run(args):
     check_outputs(out, FILES, command="skinfit population", overwrite=args.overwrite)  # before the sampling
     if out.resolve() == (run if run.is_dir() else run.parent).resolve():
         raise InputError(out, "is the run's own folder: give the population another --out (default RUN/population)")
-    with CheckpointLock(out / "checkpoint.h5"):  # the lock of `skinfit fit --out`: one writer at a time
-        # again inside the lock: a second population into this --out may have finished meanwhile
-        check_outputs(out, FILES, command="skinfit population", overwrite=args.overwrite)
-        with warnings.catch_warnings():  # the warnings are printed below, with the result
-            warnings.simplefilter("ignore", PopulationWarning)
-            result = population(args.run, params, family=family, correlated=args.correlated, method=args.method,
-                                rng=args.seed, model=args.model, max_sweeps=args.max_sweeps,
-                                cache=out / ".cache" / "population.npz")
-        tables = population_tables(result)
-        for name, table in (("summary", "hyper"), ("subjects", "subjects"), ("effects", "effects")):
-            replace_atomic(out / f"population_{name}.csv", tables[table].to_csv(index=False).encode())
-        path = result.save(out / "population.nc")
+    made = [p for p in (out, *out.parents) if not p.exists()]  # removed again if the population fails
+    try:
+        with CheckpointLock(out / "checkpoint.h5"):  # the lock of `skinfit fit --out`: one writer at a time
+            # again inside the lock: a second population into this --out may have finished meanwhile
+            check_outputs(out, FILES, command="skinfit population", overwrite=args.overwrite)
+            with warnings.catch_warnings():  # the warnings are printed below, with the result
+                warnings.simplefilter("ignore", PopulationWarning)
+                result = population(args.run, params, family=family, correlated=args.correlated,
+                                    method=args.method, rng=args.seed, model=args.model,
+                                    max_sweeps=args.max_sweeps, cache=out / ".cache" / "population.npz")
+            tables = population_tables(result)
+            for name, table in (("summary", "hyper"), ("subjects", "subjects"), ("effects", "effects")):
+                replace_atomic(out / f"population_{name}.csv", tables[table].to_csv(index=False).encode())
+            path = result.save(out / "population.nc")
+    except BaseException:
+        if made:  # a folder this command made holds at most its lock and an empty cache folder: nothing left
+            (out / ".checkpoint.h5.lock").unlink(missing_ok=True)
+            for folder in (out / ".cache", *made):
+                try:
+                    folder.rmdir()
+                except OSError:  # not empty (another writer's files) or already gone: left as it is
+                    pass
+        raise
     s = result.sampler
     lines = [f"population of {len(result.subjects)} subjects ({result.model_id}), method {s['method']}, "
              f"seed {s.get('seed')}",
