@@ -11,7 +11,7 @@ PY=$(bash scripts/find_python.sh)
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 .venv/bin/python -m pip install --quiet "uv>=0.13.9"  # UV_SYSTEM_CERTS: the system CA store
-UV=.venv/bin/uv
+UV="$ROOT/.venv/bin/uv"  # absolute: the sdist job runs it from inside the unpacked sdist
 
 echo "== lowest direct versions =="
 "$UV" venv -q --python "$PY" "$WORK/low"
