@@ -37,11 +37,11 @@ PROBS = (0.05, 0.5, 0.95)
 
 def _slot_draws(fit):
     """(name, (walkers, draws) array) of every sampled scalar, in slot order."""
-    from skinfit.results.fit import _slot_values
+    from skinfit.results.summary import slot_values
 
     ds = fit.group("posterior")
     shape = (ds.sizes["chain"], ds.sizes["draw"])
-    return [(s["name"], _slot_values(ds, s).astype(float).reshape(shape)) for s in fit.attr("slots")]
+    return [(s["name"], slot_values(ds, s).astype(float).reshape(shape)) for s in fit.attr("slots")]
 
 
 def run_one(item):

@@ -24,7 +24,7 @@ import emcee
 import numpy as np
 
 import skinfit
-from skinfit.results.fit import default_walkers, start
+from skinfit.inference.run import default_walkers, start
 from skinfit.posterior import Posterior
 from skinfit.inference.sampling import _adapt, adaptive_moves, independence_move
 

@@ -163,7 +163,7 @@ def test_the_checksums_are_those_every_netcdf_reader_sees(run):
     xr.testing.assert_identical(ours, tree)
     import h5netcdf
 
-    from skinfit.results.fit import _decoded
+    from skinfit.results.store import decoded as _decoded
 
     with h5netcdf.File(path, "r", decode_vlen_strings=True) as h:
         integrity.verify(path, record, groups={g: _decoded(h.groups[g]) for g in h.groups})

@@ -12,7 +12,7 @@ import xarray as xr
 import skinfit
 from skinfit.io import integrity
 from skinfit.results._netcdf import NotPlain, read_groups
-from skinfit.results.fit import _decoded
+from skinfit.results.store import decoded as _decoded
 
 
 def _same_mapping(a, b, where):

@@ -27,14 +27,16 @@ def test_import_skinfit_and_the_cli_load_no_arviz_matplotlib_dask_or_jinja2(code
 
 
 def test_fitting_modules_load_no_arviz_plots_matplotlib_or_jinja2():
-    loaded = _loaded("import skinfit.results.fit, skinfit.compare, skinfit.evidence, skinfit.analysis.contrasts, skinfit.analysis.groups")
+    loaded = _loaded("import skinfit.results.fitting, skinfit.analysis.compare, skinfit.analysis.evidence, "
+                     "skinfit.analysis.contrasts, skinfit.analysis.groups")
     assert not loaded & {"arviz", "arviz_plots", "matplotlib", "jinja2", "dask", "distributed"}
 
 
 def test_public_names_resolve_lazily_to_the_functions_not_the_submodules():
-    code = ("import skinfit, skinfit.fit, skinfit.compare, skinfit.evidence, types\n"
+    code = ("import skinfit, types\n"
+            "skinfit.fit, skinfit.compare, skinfit.evidence, skinfit.Fit\n"
             "assert callable(skinfit.fit) and not isinstance(skinfit.fit, types.ModuleType)\n"
-            "assert skinfit.fit is sys.modules['skinfit.results.fit'].fit\n"
+            "assert skinfit.fit is sys.modules['skinfit.results.fitting'].fit\n"
             "assert skinfit.compare is sys.modules['skinfit.analysis.compare'].compare\n"
             "assert skinfit.evidence is sys.modules['skinfit.analysis.evidence'].evidence\n"
             "assert skinfit.Fit is sys.modules['skinfit.results.fit'].Fit\n"

@@ -22,9 +22,10 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from skinfit.io.arguments import check_number, shown
+from skinfit.io.arguments import as_generator, check_number, shown
 from skinfit.errors import InputError, InputTypeError
-from skinfit.results.fit import Fit, _slot_values, as_fit, as_generator
+from skinfit.results.fit import Fit, as_fit
+from skinfit.results.summary import slot_values
 from skinfit.analysis.groups import load_groups
 from skinfit.analysis.population.population import subject_digest
 from skinfit.analysis.population.checks import check_subjects
@@ -38,7 +39,7 @@ def draws(fit, name):
     if name not in slots:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"no sampled parameter {name!r} "
                          f"(sampled: {', '.join(slots)})", field="parameter")
-    return _slot_values(fit.group("posterior"), slots[name])
+    return slot_values(fit.group("posterior"), slots[name])
 
 
 def hdi(x, prob):

@@ -1238,7 +1238,8 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     """
     import time
 
-    from skinfit.results.fit import Fit, as_generator
+    from skinfit.io.arguments import as_generator
+    from skinfit.results.fit import Fit
     from skinfit.io.models import Model, load_model
     from skinfit.io.priors import load_priors
 

@@ -20,10 +20,10 @@ import time
 
 import numpy as np
 
-from skinfit.io.arguments import check_count, check_flag, check_seed
+from skinfit.io.arguments import as_generator, check_count, check_flag, check_seed
 from skinfit.errors import InputError
 from skinfit.analysis.evidence_methods import LaplaceError, LogEvidence, bridge_sampling, laplace, nested
-from skinfit.results.fit import as_fit, as_generator
+from skinfit.results.fit import as_fit
 
 __all__ = ["evidence", "posterior_draws", "METHODS"]
 

@@ -38,7 +38,9 @@ import pandas as pd
 from skinfit.io.arguments import check_input_file, check_path, size_text
 from skinfit.io.data import Dataset, load_dataset
 from skinfit.errors import InputError, error_line
-from skinfit.results.fit import fit, load_fit, resolve_inputs
+from skinfit.inference.run import resolve_inputs
+from skinfit.results.fit import load_fit
+from skinfit.results.fitting import fit
 from skinfit.io.provenance import input_lines, input_record
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",

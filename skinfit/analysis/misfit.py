@@ -372,7 +372,7 @@ def simulated_check(model, seed, *, dataset=None, contaminate=None, fit_model=No
     uniform in [low, high] (outliers); ``fit_model``: fit another model (a competing variant)
     to the data simulated from ``model``.  All draws from ``numpy.random.default_rng(seed)``.
     """
-    from skinfit.results.fit import fit
+    from skinfit.results.fitting import fit
     from skinfit.io.models import load_model
     from skinfit.posterior import Posterior
     from skinfit.io.priors import load_priors

@@ -35,7 +35,7 @@ from scipy import stats
 from skinfit.io.arguments import check_count, check_memory, check_number, shown
 from skinfit.io.data import Dataset, list_datasets, load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, InputTypeError
-from skinfit.results.fit import check_sizes, default_walkers
+from skinfit.inference.run import check_sizes, default_walkers
 from skinfit.io.models import Model, load_model
 from skinfit.io.outputs import check_outputs
 from skinfit.posterior import Posterior
@@ -105,11 +105,11 @@ def _draw_truth(post, rng, batch=64, max_batches=200):
 
 def _slot_draws(fit, names):
     """Posterior draws (n, d) in the order of the sampled slots ``names``."""
-    from skinfit.results.fit import _slot_values
+    from skinfit.results.summary import slot_values
 
     ds = fit.group("posterior")
     slots = {s["name"]: s for s in fit.attr("slots")}
-    return np.column_stack([_slot_values(ds, slots[n]) for n in names])
+    return np.column_stack([slot_values(ds, slots[n]) for n in names])
 
 
 def run_sbc(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_draws=99, seed=0,
@@ -211,7 +211,7 @@ class _Job:
     seed: int
 
     def __call__(self, item):
-        from skinfit.results.fit import fit
+        from skinfit.results.fitting import fit
 
         i, ss = item
         rng = np.random.default_rng(ss)

@@ -98,7 +98,7 @@ from skinfit.io.toml import find_file, read_toml, require
 from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from skinfit.io.data import load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, error_line, require_optional
-from skinfit.results.fit import fit
+from skinfit.results.fitting import fit
 from skinfit.analysis.groups import (_write_json, check_name, derive_seed, group_dir, group_labels, index_document, inside,
                      record_source, source_problem)
 from skinfit.io.models import NOISE_MODELS, load_model

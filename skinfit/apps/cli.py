@@ -160,7 +160,8 @@ def _parse_split(items):
 
 
 def _cmd_fit(args):
-    from skinfit.results.fit import fit, resolve_inputs
+    from skinfit.inference.run import resolve_inputs
+    from skinfit.results.fitting import fit
 
     out = Path(args.out)
     split = _parse_split(args.split) or None

@@ -121,7 +121,7 @@ def _run_one(item, path):
 
 def _fit_one(item, path):
     from skinfit.io.data import load_dataset
-    from skinfit.results.fit import fit
+    from skinfit.results.fitting import fit
 
     t0 = time.perf_counter()
     ds = _select(load_dataset(item["dataset"]), item["rows"])

@@ -130,9 +130,9 @@ def _slots(fit, densities=False):
     bounded below by 0) and, for a plot of the priors' ``densities``, the prior, checked against
     scipy.stats; the other plots read the bounds alone and do not import it (~0.5 s of a figure
     worker's first figure)."""
-    from skinfit.results.fit import _priors_from_attrs
+    from skinfit.results.summary import priors_from_attrs
 
-    priors = _priors_from_attrs(fit.attrs, check_mass=densities)
+    priors = priors_from_attrs(fit.attrs, check_mass=densities)
     units = parameter_units(fit)
     out = []
     for s in fit.attr("slots"):

@@ -24,7 +24,8 @@ import numpy as np
 import pandas as pd
 
 from skinfit.errors import InputError
-from skinfit.results.fit import _wall_time_text, as_fit
+from skinfit.results.fit import as_fit
+from skinfit.results.summary import wall_time_text
 from skinfit.io.labels import derived_units, parameter_units
 from skinfit.io.paths import package_version
 from skinfit.inference.guardrails import BOUND_ALPHA, BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
@@ -242,7 +243,7 @@ def fit_diagnostics(fit, summary=None):
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.attrs.get("map_log_density", float("nan"))),
         f"best of {len(starts)} optimiser runs, final status {starts[-1]['status'] if starts else 'n/a'}", "info")
-    add("wall time [s]", float(t["total_s"]), _wall_time_text(t, fit.pending), "info")
+    add("wall time [s]", float(t["total_s"]), wall_time_text(t, fit.pending), "info")
     table = pd.DataFrame(rows, columns=["check", "value", "criterion", "status"]).set_index("check")
     return table, issues
 

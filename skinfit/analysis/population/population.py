@@ -56,7 +56,9 @@ import pandas as pd
 from skinfit.errors import InputError
 from skinfit.report.figure_store import storable
 from skinfit.inference.checkpoint import replace_atomic
-from skinfit.results.fit import Fit, _plain_json, _priors_from_attrs, _slot_values, as_generator, load_fit
+from skinfit.io.arguments import as_generator
+from skinfit.results.fit import Fit, load_fit, plain_json
+from skinfit.results.summary import priors_from_attrs, slot_values
 from skinfit.io import integrity
 from skinfit.analysis.population.hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 from skinfit.io.outputs import check_outputs
@@ -258,7 +260,7 @@ def _prior_moments(prior, log):
 def _choose(first, parameters, family):
     """Slot names, families and population coordinates; the defaults stated."""
     slots = {s["name"]: s for s in first.attr("slots")}
-    priors = _priors_from_attrs(first.attrs)
+    priors = priors_from_attrs(first.attrs)
     if parameters is None:  # every model parameter; noise scales stay per subject
         model_params = _model_parameter_names(first)
         parameters = [n for n, s in slots.items() if s["base"] in model_params]
@@ -748,13 +750,13 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     for s in subjects:
         f = fits[s]
         post_ds = f.group("posterior")
-        theta = np.column_stack([_slot_values(post_ds, slots[n]) for n in slots])
+        theta = np.column_stack([slot_values(post_ds, slots[n]) for n in slots])
         separate[s] = theta[:, [list(slots).index(n) for n in parameters]]
         contraction[s] = {}
         for n in parameters:
             prior = priors[slots[n]["base"]]
             q = prior.ppf((np.arange(2000) + 0.5) / 2000)
-            v = _slot_values(post_ds, slots[n])
+            v = slot_values(post_ds, slots[n])
             if prior.lower >= 0:
                 q, v = np.log(q), np.log(v)
             contraction[s][n] = float(1 - np.var(v) / np.var(q))
@@ -831,7 +833,7 @@ def _write_cache(path, key, result):
               **({"corr": result.corr} if result.corr is not None else {}),
               **{f"separate_{i}": result.separate[s] for i, s in enumerate(result.subjects)}}
     buf = io.BytesIO()
-    np.savez(buf, meta=np.array(json.dumps(meta, default=_plain_json)), **arrays)
+    np.savez(buf, meta=np.array(json.dumps(meta, default=plain_json)), **arrays)
     replace_atomic(path, buf.getvalue())
 
 
@@ -873,7 +875,7 @@ def _reweight(fits, subjects, parameters, slots, priors, logs, centre, scale, co
         cols, lp = [], 0.0
         for name, lg in zip(parameters, logs):
             prior = priors[slots[name]["base"]]
-            theta = _slot_values(post, slots[name])
+            theta = slot_values(post, slots[name])
             z = np.log(theta) if lg else theta
             lp = lp + prior.logpdf(theta) + (z if lg else 0.0)
             cols.append(z)
