@@ -1,30 +1,29 @@
 """A fit's tree saved as netCDF-4 (HDF5) and read back, with its checksums
 (:mod:`skinfit.io.integrity`) written with it and checked on every read.
 
-:func:`write_tree` writes atomically (temporary file + rename); :func:`read_tree` reads the
-groups but those named ``later`` (a fit's pointwise groups, most of a file), which
-:class:`StoredGroups` reads from the same file when they are first used.
+:func:`write_tree` writes atomically (temporary file + rename) with xarray; :func:`read_tree`
+reads, with h5netcdf, the groups but those named ``later`` (a fit's pointwise groups, most of a
+file), which :class:`StoredGroups` reads from the same file when they are first used. Each group
+becomes an xarray Dataset as ``xarray.open_datatree`` gives it (:func:`decoded`); a file of
+another layout (variables at its root, nested groups) is read whole by ``xarray.open_datatree``.
 """
 
 import errno
 import os
 import shutil
 import sys
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
 from pathlib import Path
 
+import h5netcdf
 import xarray as xr
 
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import replace_atomic
 from skinfit.io import integrity
 from skinfit.io.arguments import check_input_file, check_path
-from skinfit.results._netcdf import NotPlain, read_groups
-from skinfit.results._xarray import defer_imports
 
-__all__ = ["write_tree", "read_tree", "fit_file", "StoredGroups"]
-
-defer_imports()
+__all__ = ["write_tree", "read_tree", "fit_file", "StoredGroups", "decoded"]
 
 #: What reading a damaged or foreign file can raise (HDF5's errors through h5py, numpy's for a
 #: corrupted shape, decoding errors): each becomes one line naming the file.
@@ -44,8 +43,7 @@ def write_tree(tree, path):
     # is an OSError with the previous file in place
     dask = sys.modules.get("dask")  # in a Dask worker xarray would take a distributed lock named by the target
     integrity.stamp(tree)  # the tree in memory as it is read back: with its checksums
-    with (dask.config.set(scheduler="synchronous") if dask is not None else nullcontext()), \
-            _dask_unimported():
+    with dask.config.set(scheduler="synchronous") if dask is not None else nullcontext():
         data = integrity.seal(tree.to_netcdf(engine="h5netcdf"))  # and the sha256 of its bytes
     free = shutil.disk_usage(path.parent).free
     if free < len(data) + (1 << 20):
@@ -53,25 +51,6 @@ def write_tree(tree, path):
                                     f"{free / 2**20:.1f} MiB free", str(path))
     replace_atomic(path, data)  # a unique temp file per writer; a killed writer's is removed by the next run
     return path
-
-
-@contextmanager
-def _dask_unimported():
-    """While a process that has not imported Dask (or not its ``distributed``) writes a fit:
-    that package unimportable (as without the ``dask`` extra).  xarray's netCDF writer imports
-    them (0.1-0.8 s) only to ask which Dask scheduler is active, and none can be in a process
-    that has not imported them: the answer "none" gives the same lock, and the file written is
-    the same.  Another thread that imports the package meanwhile gets an ImportError."""
-    name = next((n for n in ("dask", "distributed") if n not in sys.modules), None)
-    if name is None:  # both imported (a Dask worker, a Client), or made unimportable by someone else
-        yield
-        return
-    sys.modules[name] = None
-    try:
-        yield
-    finally:
-        if name in sys.modules and sys.modules[name] is None:
-            del sys.modules[name]
 
 
 def fit_file(path) -> Path:
@@ -124,18 +103,13 @@ class StoredGroups:
     def read_light(self):
         """The tree without the groups of ``later`` (those in the file listed in ``names``)."""
         self.sealed = integrity.check_file(self.path)  # its bytes, before HDF5 parses any of them
-        try:  # the layout Fit.save writes, read directly; any other by h5netcdf
-            order, attrs, nodes = read_groups(self.path, lambda g: g not in self.later)
-        except NotPlain:
-            import h5netcdf
-
-            with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
-                order = list(h.groups)  # names only: a group's metadata is read when it is opened
-                light = {g: h.groups[g] for g in order if g not in self.later}
-                if h.variables or any(g.groups for g in light.values()):
-                    return self._whole()  # not Fit.save's layout
-                attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}
-                nodes = {g: decoded(group) for g, group in light.items()}
+        with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
+            order = list(h.groups)  # names only: a group's metadata is read when it is opened
+            light = {g: h.groups[g] for g in order if g not in self.later}
+            if h.variables or any(g.groups for g in light.values()):
+                return self._whole()  # not Fit.save's layout
+            attrs = _attributes(h)
+            nodes = {g: decoded(group) for g, group in light.items()}
         self.record = integrity.take(self.path, attrs, order, sealed=self.sealed)  # else its content's checksums
         integrity.verify(self.path, self.record, groups=nodes)
         self.order, self.names = order, [g for g in order if g in self.later]
@@ -143,7 +117,8 @@ class StoredGroups:
 
     def _whole(self):
         """The whole tree of a file of another layout (``xarray.open_datatree``), checked."""
-        tree = xr.open_datatree(self.path, engine="h5netcdf").load()
+        with xr.open_datatree(self.path, engine="h5netcdf") as tree:
+            tree = tree.load()
         record = integrity.take(self.path, tree.attrs, list(tree.children), sealed=self.sealed)
         integrity.verify(self.path, record, groups=integrity.groups_of(tree))
         return tree
@@ -158,10 +133,12 @@ class StoredGroups:
             raise InputError(self.path, "changed or removed since the fit was loaded: load it again "
                                         "(its pointwise log-likelihood and predictive draws are read on first use)")
         try:
-            try:
-                extra = read_groups(self.path, lambda g: g in self.names)[2]
-            except NotPlain:
-                extra = self._read_h5netcdf()
+            with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
+                groups = {g: h.groups[g] for g in self.names}
+                if any(group.groups for group in groups.values()):
+                    raise InputError(self.path, f"groups inside {', '.join(g for g in groups if groups[g].groups)}: "
+                                                "not a fit file skinfit writes")
+                extra = {g: decoded(group) for g, group in groups.items()}
         except InputError:
             raise
         except _UNREADABLE as exc:
@@ -171,20 +148,17 @@ class StoredGroups:
         order = [g for g in self.order if g in nodes] + [g for g in nodes if g not in self.order]
         return xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)} | {n: nodes[n] for n in order})
 
-    def _read_h5netcdf(self):
-        """The groups of ``names`` read by h5netcdf (a file of another layout than Fit.save's)."""
-        import h5netcdf
-
-        with h5netcdf.File(self.path, "r", decode_vlen_strings=True) as h:
-            groups = {g: h.groups[g] for g in self.names}
-            if any(group.groups for group in groups.values()):
-                raise InputError(self.path, f"groups inside {', '.join(g for g in groups if groups[g].groups)}: "
-                                            "not a fit file skinfit writes")
-            return {g: decoded(group) for g, group in groups.items()}
-
 
 def decoded(group):
-    """One h5netcdf group as an xarray Dataset, decoded as ``xarray.open_dataset`` decodes it."""
-    variables = {k: xr.Variable(v.dimensions, v[...], attrs=dict(v.attrs)) for k, v in group.variables.items()}
-    attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in group.attrs.items()}
-    return xr.decode_cf(xr.Dataset(variables, attrs=attrs))
+    """One group of an open ``h5netcdf.File`` as an xarray Dataset, decoded as
+    ``xarray.open_datatree`` decodes it: its variables' values read, text attributes as str,
+    CF conventions applied by ``xarray.decode_cf``."""
+    variables = {k: xr.Variable(v.dimensions, v[...], attrs=_attributes(v)) for k, v in group.variables.items()}
+    return xr.decode_cf(xr.Dataset(variables, attrs=_attributes(group)))
+
+
+def _attributes(obj):
+    """The attributes of an h5netcdf group or variable, bytes decoded as UTF-8 (as xarray's
+    h5netcdf backend gives them; a fill value stays as stored)."""
+    return {k: v.decode() if isinstance(v, bytes) and k not in ("_FillValue", "missing_value") else v
+            for k, v in obj.attrs.items()}
