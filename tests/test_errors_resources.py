@@ -61,7 +61,7 @@ def test_class5_pointwise_groups_thinned_to_the_memory_budget(monkeypatch, tmp_p
     """4320 rows; the available memory patched so that all draws need 6.5x the budget: every
     7th draw of each walker is kept, the note is in the text and the file, and LOO, the
     misfit check and a save/load still work on the kept draws."""
-    fit = _quiet_fit(MODEL, _large_rows(20), rng=1)
+    fit = _quiet_fit(MODEL, _large_rows(20), rng=1, complete=False)
     nw, nd = fit.attr("sampler")["nwalkers"], fit.group("posterior").sizes["draw"]
     need = run_module.pointwise_bytes(1, 4320, nw * nd)
     monkeypatch.setattr(run_module, "available_memory", lambda: need / 6.5 / run_module.MEMORY_FRACTION)
@@ -81,7 +81,7 @@ def test_class5_pointwise_groups_thinned_to_the_memory_budget(monkeypatch, tmp_p
 
 
 def test_class5_one_draw_of_every_jth_walker_when_a_draw_per_walker_is_over_budget(monkeypatch):
-    fit = _quiet_fit(MODEL, _large_rows(20), rng=1)
+    fit = _quiet_fit(MODEL, _large_rows(20), rng=1, complete=False)
     nw = fit.attr("sampler")["nwalkers"]
     per_draw = run_module.pointwise_bytes(1, 4320, 1)
     monkeypatch.setattr(run_module, "available_memory", lambda: per_draw * 5.5 / run_module.MEMORY_FRACTION)

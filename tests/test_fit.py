@@ -187,20 +187,21 @@ def test_save_load_identical(ea_fit, tmp_path):
 
 
 def test_same_seed_identical_samples_whenever_the_pointwise_groups_are_computed():
-    """One fit's pointwise groups computed at once, the other's after another fit, its groups
-    and unrelated random draws: bit for bit the same; a Generator passed in is advanced by the
-    fit alone (as a fit from the same seed advances its own), not by the pointwise groups."""
+    """One fit complete as skinfit.fit returns it, the other made pending (complete=False) and
+    completed after another fit, its groups and unrelated random draws: bit for bit the same,
+    with the same check of the fit to the data; a Generator passed in is advanced by the fit
+    alone (as a fit from the same seed advances its own), not by the pointwise groups."""
     generator = np.random.default_rng(7)
     a = _short_fit(rng=generator)
     after_fit = generator.bit_generator.state
-    a.idata
-    assert not a.pending and generator.bit_generator.state == after_fit
+    assert not a.pending and "pointwise_s" in a.attr("timings") and a.attr("misfit")["checks"]
     b_generator = np.random.default_rng(7)
-    b = _short_fit(rng=b_generator)
+    b = _short_fit(rng=b_generator, complete=False)
     assert b.pending and b_generator.bit_generator.state == after_fit
     c = _short_fit(rng=8)
-    c.idata
     np.random.default_rng(0).standard_normal(1000), np.random.standard_normal(1000)
+    b.complete()
+    assert not b.pending and b.attrs["misfit"] == a.attrs["misfit"] and b.warnings == a.warnings
     for group, var in [("posterior", "E_star"), ("sample_stats", "lp"), ("log_likelihood", "tangential_force"),
                        ("posterior_predictive", "tangential_force")]:
         np.testing.assert_array_equal(a.idata[group][var].values, b.idata[group][var].values)
@@ -212,11 +213,22 @@ def test_pointwise_groups_agree_with_the_posterior(ea_fit):
     check_pointwise_groups(ea_fit)
 
 
-def test_pointwise_groups_wait_for_first_use_and_are_saved(tmp_path):
-    """A fresh fit's summaries, provenance, diagnostics and evidence leave the pointwise groups
-    pending; saving computes them; the evidence cached before is kept through both."""
-    fit = _short_fit(rng=5)
+def test_a_fit_made_pending_is_completed_by_one_explicit_call_never_by_a_property(tmp_path):
+    """A fit made with complete=False: its summaries, provenance, diagnostics and evidence
+    leave the pointwise groups pending; ``idata`` and the pointwise groups raise one line naming
+    ``fit.complete()``, computing, checking and warning nothing; saving completes it; the
+    evidence cached before is kept through both."""
+    fit = _short_fit(rng=5, complete=False)
     assert fit.pending and "pointwise_s" not in fit.attr("timings")
+    attrs = dict(fit.attrs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for read in (lambda: fit.idata, lambda: fit.group("log_likelihood"),
+                     lambda: fit.group("posterior_predictive")):
+            with pytest.raises(RuntimeError, match=r"call fit\.complete\(\) first") as caught:
+                read()
+            assert "\n" not in str(caught.value)
+    assert fit.pending and dict(fit.attrs) == attrs and "misfit" not in fit.attrs
     fit.summary(), fit.diagnostics(), fit.attr("sampler"), fit.map, fit.warnings, fit.converged, repr(fit)
     assert fit.model_id == "electroadhesion" and fit.dataset_id == "electroadhesion_synthetic"
     assert fit.attrs["seed"] == 5 and fit.group("posterior").sizes["chain"] == fit.attr("sampler")["nwalkers"]

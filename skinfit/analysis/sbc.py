@@ -223,7 +223,7 @@ class _Job:
             warnings.simplefilter("always", ConvergenceWarning)
             result = fit(self.post.model, ds, priors=self.fit_priors, rng=fit_seed, split=self.split,
                          ess_target=self.ess_target, max_steps=self.max_steps, n_global=self.n_global,
-                         n_prior_draws=10)
+                         n_prior_draws=10, complete=False)
         draws = _slot_draws(result, list(self.post.names))
         pick = rng.choice(len(draws), size=self.n_draws, replace=len(draws) < self.n_draws)
         s = result.attr("sampler")

@@ -54,9 +54,14 @@ class Fit:
     """The result of :func:`skinfit.fit`: an ArviZ DataTree plus convenience views.
 
     ``fit.idata`` is the DataTree; ``fit.summary()`` a table; ``fit.save(path)`` writes NetCDF.
-    A fresh fit defers the groups of :data:`DEFERRED` (:attr:`pending`): :attr:`idata`,
-    :meth:`complete` and :meth:`save` compute them; :attr:`attrs`, :meth:`group` of any other
-    group, :meth:`summary`, :meth:`report_text` and the provenance properties do not.
+
+    A fit is complete when made (:func:`skinfit.fit`) or loaded (:func:`load_fit`), or after one
+    explicit call, :meth:`complete`, for a fit made with ``skinfit.fit(..., complete=False)``:
+    until then it is :attr:`pending`, without the groups of :data:`DEFERRED` (pointwise
+    log-likelihood and predictive draws) and the check of the fit to the data, and
+    :attr:`idata` and :meth:`group` of those groups raise a RuntimeError naming
+    :meth:`complete`. No property computes anything, checks anything or warns; a loaded fit's
+    pointwise groups are read from its file when first used (:attr:`idata`, :meth:`group`).
     """
 
     def __init__(self, idata, posterior=None, *, pointwise=None, stored=None, path=None):
@@ -74,14 +79,16 @@ class Fit:
 
     @property
     def pending(self):
-        """True until the groups of :data:`DEFERRED` are in the tree."""
+        """True for a fit made with ``skinfit.fit(..., complete=False)`` until :meth:`complete`:
+        the groups of :data:`DEFERRED` and the check of the fit to the data are still to come."""
         return self._pointwise is not None
 
     @property
     def idata(self):
-        """The complete ArviZ DataTree (computes the deferred groups on first access, or reads
-        them from the file of a loaded fit)."""
-        return self.complete()._tree
+        """The complete ArviZ DataTree (a loaded fit's pointwise groups read from its file on
+        first use); RuntimeError for a :attr:`pending` fit."""
+        self._require_complete("idata")
+        return self._read_stored()._tree
 
     @property
     def partial_tree(self):
@@ -90,21 +97,33 @@ class Fit:
         return self._tree
 
     def complete(self) -> Fit:
-        """Compute the deferred groups, if pending, and put them in the tree in ArviZ's order
-        (:data:`GROUPS`), with their time as ``pointwise_s`` in ``attr("timings")`` and the
-        check of the fit to the data (:mod:`skinfit.analysis.misfit`: its record as
-        ``attr("misfit")``, each failed check in :attr:`warnings` and warned as a
+        """Complete a :attr:`pending` fit: compute the groups of :data:`DEFERRED` and put them in
+        the tree in ArviZ's order (:data:`GROUPS`), with their time as ``pointwise_s`` in
+        ``attr("timings")``, and check the fit to the data on them (:mod:`skinfit.analysis.misfit`:
+        its record as ``attr("misfit")``, each failed check in :attr:`warnings` and warned as a
         :class:`~skinfit.analysis.misfit.MisfitWarning`); for a loaded fit, read them from its
-        file.  Returns the fit.  The root attributes are kept (e.g. an evidence already cached)."""
-        if self._stored is not None:
-            self._tree, self._stored = self._stored.read(self._tree), None
+        file; for a complete fit, nothing.  Returns the fit.  The root attributes are kept
+        (e.g. an evidence already cached)."""
+        self._read_stored()
         if self._pointwise is None:
             return self
         tree, messages = self._pointwise.complete(self._tree, self.posterior)
         self._tree, self._pointwise = tree, None
-        for message, category in messages:
+        for message, category in messages:  # memory thinning, misfit
             warnings.warn(message, category, stacklevel=2)
         return self
+
+    def _read_stored(self):
+        """The fit, with the groups of :data:`DEFERRED` of a loaded fit read from its file."""
+        if self._stored is not None:
+            self._tree, self._stored = self._stored.read(self._tree), None
+        return self
+
+    def _require_complete(self, what):
+        if self.pending:
+            raise RuntimeError(f"{self.model_id} on {self.dataset_id}: {what} needs the pointwise log-likelihood and "
+                               "predictive groups of this fit, made with skinfit.fit(..., complete=False): call "
+                               "fit.complete() first")
 
     @property
     def attrs(self):
@@ -113,10 +132,12 @@ class Fit:
         return self._tree.attrs
 
     def group(self, name):
-        """One group of the tree as an ``xarray.Dataset``; only the groups of
-        :data:`DEFERRED` compute them first."""
-        tree = self.idata if name in DEFERRED else self._tree
-        return tree[name].to_dataset()
+        """One group of the tree as an ``xarray.Dataset`` (one of :data:`DEFERRED` read from a
+        loaded fit's file on first use; RuntimeError for those of a :attr:`pending` fit)."""
+        if name in DEFERRED:
+            self._require_complete(f"group({name!r})")
+            self._read_stored()
+        return self._tree[name].to_dataset()
 
     # ---- provenance ---------------------------------------------------------------------
     def attr(self, key):
@@ -286,7 +307,7 @@ class Fit:
         directory, a device such as /dev/null or a FIFO there is refused first)."""
         path = check_output_file(path, "Fit.save", "path", "fit")
         path.parent.mkdir(parents=True, exist_ok=True)
-        tree = self.idata
+        tree = self.complete()._tree
         schema = tree.attrs.get(integrity.SCHEMA_ATTR)
         if not isinstance(schema, (int, np.integer)) or schema < integrity.CHECKED_SCHEMA:  # an older file saved again
             tree.attrs[integrity.SCHEMA_ATTR] = integrity.CHECKED_SCHEMA  # (before its summary's key is computed)

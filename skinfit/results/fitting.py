@@ -1,8 +1,8 @@
 """``skinfit.fit``: MAP (nlopt) -> emcee from the importance start -> diagnostics -> a :class:`Fit`.
 
 The inference is :func:`skinfit.inference.run.run`; this builds its result: the tree
-(:func:`skinfit.results.tree.build_tree`), the convergence and guard-rail warnings, and the
-timings.
+(:func:`skinfit.results.tree.build_tree`), the convergence and guard-rail warnings, the
+timings, and (unless asked not to) the pointwise groups with the check of the fit to the data.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         nwalkers: int | None = None, ess_target: float = 400, max_steps: int = 20000, progress: bool = False,
         strict: bool = False, n_global: int = 2000, n_local: int = 4, n_prior_draws: int = 2000,
         checkpoint: str | os.PathLike | None = None, resume: bool = False,
-        checkpoint_every: float = 30.0) -> Fit:
+        checkpoint_every: float = 30.0, complete: bool = True) -> Fit:
     """Fit ``model`` to ``dataset``: MAP by nlopt, then emcee until converged.
 
     Parameters
@@ -73,24 +73,27 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     resume : bool
         Continue from ``checkpoint`` if it exists (MAP, walkers and random states restored:
         the result equals an uninterrupted run's); InputError if it belongs to other inputs.
+    complete : bool
+        Compute the pointwise ``log_likelihood`` and ``posterior_predictive`` groups (a value per
+        posterior draw and data row each, most of a fit's memory) and check the fit to the data
+        on them (:mod:`skinfit.inference.misfit`) before returning (default).  False returns at
+        the converged posterior: a fit whose :attr:`Fit.pending` is true, for callers that need
+        only the posterior (simulation-based calibration); :meth:`Fit.complete` (or
+        :meth:`Fit.save`) completes it, with the same numbers.
 
     Returns
     -------
     Fit
-        Its tree holds every group but ``log_likelihood`` and ``posterior_predictive`` (a
-        value per posterior draw and data row each), which are computed on first use of
-        :attr:`Fit.idata` (or by :meth:`Fit.save`, ``skinfit fit``, reports and
-        :func:`~skinfit.compare`); until then :attr:`Fit.pending` is true.  Its
-        ``attr("timings")`` [s]: ``map_s`` the MAP search;
-        ``start_s`` from the first random draw to the first step (the MAP search and the
-        importance start); ``sampling_s``; ``tree_s`` the result tree without the deferred
-        groups; ``total_s`` the whole call; ``resumed``; and, once they are computed,
-        ``pointwise_s`` the deferred groups.  A resumed fit (``resumed`` true) had its MAP and
-        start in the run that wrote the checkpoint: its ``map_s`` is that run's, ``start_s``
-        is 0 and ``sampling_s`` sums every run's sampling.
+        Its ``attr("timings")`` [s]: ``map_s`` the MAP search; ``start_s`` from the first random
+        draw to the first step (the MAP search and the importance start); ``sampling_s``;
+        ``tree_s`` the result tree without the pointwise groups; ``total_s`` the call up to
+        there; ``resumed``; and, once the fit is complete, ``pointwise_s`` and ``misfit_s`` the
+        pointwise groups and the check of the fit to the data.  A resumed fit (``resumed``
+        true) had its MAP and start in the run that wrote the checkpoint: its ``map_s`` is that
+        run's, ``start_s`` is 0 and ``sampling_s`` sums every run's sampling.
     """
     t_start = time.perf_counter()
-    strict = check_flag(strict, "fit", "strict")
+    strict, complete = check_flag(strict, "fit", "strict"), check_flag(complete, "fit", "complete")
     result = run(model, dataset, priors, units=units, rng=rng, split=split, noise=noise, constants=constants,
                  nwalkers=nwalkers, ess_target=ess_target, max_steps=max_steps, progress=progress,
                  n_global=n_global, n_local=n_local, n_prior_draws=n_prior_draws, checkpoint=checkpoint,
@@ -113,4 +116,9 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     for w in result.warnings:  # non-convergence was warned above
         if w["check"] != "convergence":
             warnings.warn(f"{post.model.id} on {post.dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
-    return Fit(tree, posterior=post, pointwise=pointwise)
+    if not complete:
+        return Fit(tree, posterior=post, pointwise=pointwise)
+    tree, messages = pointwise.complete(tree, post)
+    for message, category in messages:  # memory thinning, misfit
+        warnings.warn(message, category, stacklevel=2)
+    return Fit(tree, posterior=post)
