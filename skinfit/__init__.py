@@ -32,7 +32,7 @@ _PUBLIC = {
     "InputError": "skinfit.errors", "InputTypeError": "skinfit.errors", "ForwardError": "skinfit.errors",
     "MissingDependency": "skinfit.errors", "WorkerError": "skinfit.errors",
     "ConvergenceWarning": "skinfit.errors", "SupportWarning": "skinfit.errors", "IntegrityWarning": "skinfit.errors",
-    "MisfitWarning": "skinfit.analysis.misfit", "PopulationWarning": "skinfit.analysis.population.population",
+    "MisfitWarning": "skinfit.inference.misfit", "PopulationWarning": "skinfit.analysis.population.population",
     "ShadowWarning": "skinfit.io.provenance",
 }
 

@@ -638,7 +638,20 @@ class Posterior:
         return np.column_stack([s.prior.ppf(u[:, j]) for j, s in enumerate(self.slots)])
 
     def sample_prior(self, size, rng):
+        """``size`` draws from the prior, natural parameters (size, d)."""
         return self.prior_transform(rng.uniform(size=(size, self.ndim)))
+
+    def prior_draw_in_support(self, rng, batch=64, max_batches=200):
+        """One prior draw inside the model's physical support, natural parameters (d,): the
+        first valid one of batches of ``batch`` prior draws (the truth of a simulation: SBC,
+        the misfit check's calibration). RuntimeError after ``max_batches`` batches."""
+        for _ in range(max_batches):
+            theta = self.sample_prior(batch, rng)
+            _, _, valid = self.pointwise(theta)
+            if valid.any():
+                return theta[int(np.argmax(valid))]
+        raise RuntimeError(f"{self.model.id}: no prior draw inside the physical support in "
+                           f"{batch * max_batches} tries ({self.model.support})")
 
     def describe(self):
         return {"parameters": list(self.names), "observables": list(self.observables),

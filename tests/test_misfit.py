@@ -1,4 +1,4 @@
-"""Issue 21, class 8: a fit checks its own fit to the data (skinfit.analysis.misfit) and says so in its
+"""Issue 21, class 8: a fit checks its own fit to the data (skinfit.inference.misfit) and says so in its
 report text, its saved file and the HTML report; two runs of one model on one dataset are told
 apart by their options in compare and report.  Issue 39 point 3: the check looks at every
 column of the dataset and at the order of the rows, not only at the model's covariates."""
@@ -13,7 +13,8 @@ import pytest
 
 import skinfit
 from skinfit.results.run_labels import run_labels
-from skinfit.analysis.misfit import ALPHA, MisfitWarning, check_fit, simulated_check
+from skinfit.analysis.misfit import simulated_check
+from skinfit.inference.misfit import ALPHA, MisfitWarning, check_fit
 from skinfit.posterior import Posterior
 from skinfit.report.html import _as_fits, fit_diagnostics
 

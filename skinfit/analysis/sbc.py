@@ -92,17 +92,6 @@ def _rows(ds, n_rows):
     return ds.subset(keep, f"{n_rows} rows")
 
 
-def _draw_truth(post, rng, batch=64, max_batches=200):
-    """One prior draw inside the physical support (natural parameters, (d,))."""
-    for _ in range(max_batches):
-        theta = post.sample_prior(batch, rng)
-        _, _, valid = post.pointwise(theta)
-        if valid.any():
-            return theta[int(np.argmax(valid))]
-    raise RuntimeError(f"{post.model.id}: no prior draw inside the physical support in "
-                       f"{batch * max_batches} tries ({post.model.support})")
-
-
 def _slot_draws(fit, names):
     """Posterior draws (n, d) in the order of the sampled slots ``names``."""
     from skinfit.results.summary import slot_values
@@ -216,7 +205,7 @@ class _Job:
         i, ss = item
         rng = np.random.default_rng(ss)
         fit_seed = int(rng.integers(2**63 - 1))
-        theta = _draw_truth(self.post, rng)
+        theta = self.post.prior_draw_in_support(rng)
         y = {o: v[0] for o, v in self.post.simulate(theta[None], rng).items()}
         ds = self.design.with_observations(y, f"sbc seed {self.seed} sim {i}")
         with warnings.catch_warnings(record=True) as caught:

@@ -99,9 +99,9 @@ class Fit:
     def complete(self) -> Fit:
         """Complete a :attr:`pending` fit: compute the groups of :data:`DEFERRED` and put them in
         the tree in ArviZ's order (:data:`GROUPS`), with their time as ``pointwise_s`` in
-        ``attr("timings")``, and check the fit to the data on them (:mod:`skinfit.analysis.misfit`:
+        ``attr("timings")``, and check the fit to the data on them (:mod:`skinfit.inference.misfit`:
         its record as ``attr("misfit")``, each failed check in :attr:`warnings` and warned as a
-        :class:`~skinfit.analysis.misfit.MisfitWarning`); for a loaded fit, read them from its
+        :class:`~skinfit.inference.misfit.MisfitWarning`); for a loaded fit, read them from its
         file; for a complete fit, nothing.  Returns the fit.  The root attributes are kept
         (e.g. an evidence already cached)."""
         self._read_stored()
@@ -210,7 +210,7 @@ class Fit:
         table = summary_from_attr(self._tree.attrs.get(SUMMARY_ATTR), key, self._slot_names())
         if table is None:
             table = self._compute_summary()
-        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.inference.guardrails, skinfit.analysis.misfit)
+        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.inference.guardrails, skinfit.inference.misfit)
         table.attrs["notes"] = self.notes  # information, not failures (skinfit.inference.guardrails)
         self._summary = (key, table)
         return table.copy()

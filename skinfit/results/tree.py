@@ -20,7 +20,7 @@ import numpy as np
 import xarray as xr
 from arviz_base import from_dict
 
-from skinfit.analysis.misfit import MisfitWarning, check_fit, misfit_messages
+from skinfit.inference.misfit import MisfitWarning, check_fit, misfit_messages
 from skinfit.inference.run import pointwise_thinning
 from skinfit.inference.sampling import describe_moves, sampler_settings
 from skinfit.io import integrity
