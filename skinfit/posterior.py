@@ -10,8 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from skinfit.io.labels import noise_suffix
-from skinfit.io.units import to_si
+from skinfit.io.labels import level_labels, noise_suffix
 
 from skinfit.io.arguments import check_mapping, shown
 from skinfit.errors import InputError, InputTypeError
@@ -19,7 +18,7 @@ from skinfit.io.data import check_units
 from skinfit.io.forward_check import check_forward, check_quantiles, forward_error
 from skinfit.io.models import NOISE_MODELS, resolve_forward as _resolve
 from skinfit.io.priors import check_priors_for
-from skinfit.io.priors import _LOGPDF
+from skinfit.io.priors import LOG_DENSITIES
 
 __all__ = ["Posterior", "Slot", "noise_parameter_names"]
 
@@ -211,7 +210,7 @@ class Posterior:
         for pname in needed:
             prior = priors[pname]
             if pname in self.split:
-                labels = _level_labels(frame, self.split[pname], dataset)
+                labels = level_labels(frame, self.split[pname], dataset)
                 levels = list(dict.fromkeys(labels))  # order of appearance
                 codes = np.array([levels.index(v) for v in labels])
                 self.levels[pname] = (self.split[pname], tuple(levels))
@@ -671,19 +670,6 @@ def _prior_groups(slots):
             continue
         priors = [slots[j].prior for j in cols]
         args = {k: np.array([p.args[k] for p in priors]) for k in priors[0].args}
-        out.append((_LOGPDF[dist], np.array(cols), args))
+        out.append((LOG_DENSITIES[dist], np.array(cols), args))
     return tuple(out)
 
-
-def _level_labels(frame, cols, dataset):
-    parts = []
-    for c in cols:
-        values = frame[c]
-        try:
-            unit = dataset.column(c).unit
-        except KeyError:
-            unit = None
-        if unit is not None:
-            values = [f"{v / to_si(unit):g}" for v in values.to_numpy(dtype=float)]
-        parts.append([str(v) for v in values])
-    return [",".join(t) for t in zip(*parts)]

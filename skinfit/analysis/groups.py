@@ -79,9 +79,9 @@ def group_labels(dataset, by, where="--by"):
         if c not in frame.columns:
             raise InputError(where, f"no column {c!r} in {dataset.path} (columns: "
                              f"{', '.join(frame.columns)}; declared groups: {', '.join(dataset.groups) or 'none'})")
-    from skinfit.posterior import _level_labels
+    from skinfit.io.labels import level_labels
 
-    parts = [[f"{c}={v}" for v in _level_labels(frame, [c], dataset)] for c in by]
+    parts = [[f"{c}={v}" for v in level_labels(frame, [c], dataset)] for c in by]
     labels = [",".join(t) for t in zip(*parts)]
     return labels, list(dict.fromkeys(labels))
 

@@ -18,6 +18,7 @@ if TYPE_CHECKING:  # names used only in annotations
 
 import math
 import re
+import tomllib
 import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -28,10 +29,12 @@ import numpy as np
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError, SupportWarning
 from skinfit.io.forward_check import forward_error, validated
+from skinfit.io.paths import display
 from skinfit.io.registry import resolve
 from skinfit.io.units import check_model_unit
 
-__all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "check_id", "NOISE_MODELS"]
+__all__ = ["Model", "Quantity", "load_model", "list_models", "parse_model_text", "resolve_forward", "check_id",
+           "NOISE_MODELS"]
 
 NOISE_MODELS = ("normal", "student_t", "lognormal")
 
@@ -246,7 +249,7 @@ def load_model(name: str | os.PathLike) -> Model:
 
 def _parse_model(path, digest):
     _, text = read_toml(path)
-    model = replace(_parse_model_text(text, _display(path), digest), file=str(Path(path).resolve()))
+    model = replace(parse_model_text(text, display(path), digest), file=str(Path(path).resolve()))
     from skinfit.io.references import check_source
 
     check_source(model.source, model.path, "source")  # keys into references.toml
@@ -264,9 +267,11 @@ def check_constant(name, value, where):
     return float(value)
 
 
-def _parse_model_text(text, where, digest):
-    import tomllib
-
+def parse_model_text(text, where, digest):
+    """The :class:`Model` of a model card's TOML ``text`` (as read from a file, or as saved in a
+    fit's root attributes), validated; ``where`` names it in errors and becomes its ``path``,
+    ``digest`` is the sha256 of its file. Its ``source`` keys are not resolved here
+    (:func:`load_model` checks them against the references files)."""
     doc = tomllib.loads(text)
     constants, sources = {}, {}
     for cname, spec in require(doc, "constants", dict, where, default={}).items():
@@ -365,12 +370,6 @@ def _derived_table(doc, where):
     over = require(table, "over", list, where, field_prefix="derived.", default=[])
     return MappingProxyType({"function": ref, "over": tuple(over),
                              "quantities": MappingProxyType(dict(quantities))})
-
-
-def _display(path):
-    from skinfit.io.paths import display
-
-    return display(path)
 
 
 def list_models() -> list[str]:

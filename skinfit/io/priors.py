@@ -22,10 +22,11 @@ import numpy as np
 
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError
-from skinfit.io.models import _display, check_id
+from skinfit.io.models import check_id
+from skinfit.io.paths import display
 from skinfit.io.references import check_source
 
-__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS"]
+__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS", "LOG_DENSITIES"]
 
 
 def _stats():
@@ -46,8 +47,11 @@ DISTRIBUTIONS = {
     "gamma": (("shape", "scale"), lambda a, lo, hi: _stats().gamma(a=a["shape"], scale=a["scale"])),
     "beta": (("a", "b"), lambda a, lo, hi: _stats().beta(a["a"], a["b"])),
 }
-# Closed-form log-densities without their normalising constants (see Prior._log_norm).
-_LOGPDF = {
+#: Distribution name -> its closed-form log-density without the normalising constant, a numpy
+#: function ``(x, args, lower, upper)`` of values ``x`` (any shape) and the prior's arguments
+#: (:attr:`Prior.args`, each a scalar or an array broadcasting with ``x``); the constant is
+#: :attr:`Prior._log_norm`. The sampling hot path evaluates priors with these, one call per family.
+LOG_DENSITIES = {
     "uniform": lambda x, a, lo, hi: np.zeros_like(x),
     "loguniform": lambda x, a, lo, hi: -np.log(x),
     "normal": lambda x, a, lo, hi: -0.5 * ((x - a["loc"]) / a["scale"]) ** 2,
@@ -101,7 +105,7 @@ class Prior:
         x = np.asarray(x, dtype=float)
         inside = (x >= self.lower) & (x <= self.upper)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lp = _LOGPDF[self.dist](x, self.args, self.lower, self.upper) - self._log_norm
+            lp = LOG_DENSITIES[self.dist](x, self.args, self.lower, self.upper) - self._log_norm
         return np.where(inside, lp, -np.inf)
 
     @cached_property
@@ -247,7 +251,7 @@ def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet
     file's identity (its sha256) and what it declares, not its distributions."""
     path = find_file("priors", name)
     doc, text = read_toml(path)
-    where = _display(path)
+    where = display(path)
     model = check_id(require(doc, "model", str, where), where, field="model")
     if "id" in doc:
         check_id(doc["id"], where)

@@ -27,7 +27,7 @@ from skinfit.errors import InputError, InputTypeError
 from skinfit.io import integrity
 from skinfit.io.arguments import check_output_file, shown
 from skinfit.io.data import Column, Dataset
-from skinfit.io.models import _parse_model_text
+from skinfit.io.models import parse_model_text
 from skinfit.io.priors import PriorSet
 from skinfit.io.provenance import input_lines, inputs_of
 from skinfit.posterior import Posterior
@@ -393,7 +393,7 @@ def rebuild_posterior(tree):
     without the optimiser, the sampler or ArviZ's tree builder: a report's predictive check
     rebuilds it without fitting."""
     attrs = tree.attrs
-    model = _parse_model_text(attrs["model_card"], f"model card saved in fit ({attrs['model_id']})",
+    model = parse_model_text(attrs["model_card"], f"model card saved in fit ({attrs['model_id']})",
                               attrs["model_sha256"])
     priors = PriorSet(id=attrs["priors_id"], model=attrs["model_id"],
                       priors=MappingProxyType(priors_from_attrs(attrs)), path="saved priors",

@@ -24,9 +24,8 @@ from skinfit.inference.misfit import MisfitWarning, check_fit, misfit_messages
 from skinfit.inference.run import pointwise_thinning
 from skinfit.inference.sampling import describe_moves, sampler_settings
 from skinfit.io import integrity
-from skinfit.io.labels import annotate
+from skinfit.io.labels import annotate, level_labels
 from skinfit.io.units import si_unit
-from skinfit.posterior import _level_labels
 from skinfit.results.fit import GROUPS
 
 __all__ = ["build_tree", "Pointwise", "versions"]
@@ -194,7 +193,7 @@ def _derived_group(post, theta, nw, nd, dims, coords, attrs):
         return {}
     attrs["derived"] = json.dumps({"function": spec["function"], "quantities": dict(spec["quantities"])})
     cols = list(spec["over"]) + [c for cs in post.split.values() for c in cs if c not in spec["over"]]
-    labels = _level_labels(post.dataset.frame, cols, post.dataset) if cols else ["all"] * post.n
+    labels = level_labels(post.dataset.frame, cols, post.dataset) if cols else ["all"] * post.n
     levels = list(dict.fromkeys(labels))
     first = [labels.index(v) for v in levels]
     out = {}
