@@ -7,12 +7,26 @@ import tomllib
 
 from skinfit.io.units import si_unit, to_si
 
-__all__ = ["variable_attrs", "annotate", "noise_suffix", "level_labels", "parameter_units", "derived_units"]
+__all__ = ["variable_attrs", "annotate", "noise_suffix", "noise_parameter_names", "level_labels", "parameter_units",
+           "derived_units"]
 
 
 def noise_suffix(observables, obs):
     """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
     return "" if len(observables) == 1 else f"_{obs}"
+
+
+def noise_parameter_names(observables, noise):
+    """Names of the noise parameters of ``observables`` with noise models ``noise`` (a mapping
+    observable -> normal | student_t | lognormal): ``sigma`` (+ ``nu`` for Student-t), suffixed
+    when several observables (:func:`noise_suffix`)."""
+    names = []
+    for obs in observables:
+        suffix = noise_suffix(observables, obs)
+        names.append(f"sigma{suffix}")
+        if noise[obs] == "student_t":
+            names.append(f"nu{suffix}")
+    return names
 
 
 def level_labels(frame, cols, dataset):

@@ -26,7 +26,8 @@ from skinfit.io.models import check_id
 from skinfit.io.paths import display
 from skinfit.io.references import check_source
 
-__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS", "LOG_DENSITIES"]
+__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "check_physical", "prior_groups",
+           "DISTRIBUTIONS", "LOG_DENSITIES"]
 
 
 def _stats():
@@ -243,6 +244,38 @@ def check_priors_for(priors, model):
     if priors.model != model.id:
         raise InputError(priors.path or priors.id, f"is a prior file for model {priors.model!r}, not for "
                          f"{model.id!r} (copy it and set model = {model.id!r} if it applies)", field="model")
+
+
+def check_physical(model, priors, noise_names):
+    """Refuse a prior whose bounds leave the range the physics allows: the model card's
+    ``physical = [lower, upper]`` of each parameter, and [0, inf] for the noise parameters
+    ``noise_names`` (scales, Student-t degrees of freedom)."""
+    ranges = {q.name: q.physical for q in model.parameters}
+    ranges.update({n: (0.0, math.inf) for n in noise_names})
+    for name, (lo, hi) in ranges.items():
+        prior = priors[name]
+        if prior.lower < lo or prior.upper > hi:
+            raise InputError(priors.path or "priors", f"bounds [{prior.lower:g}, {prior.upper:g}] leave the "
+                             f"physical range [{lo:g}, {hi:g}] of {name} declared by model {model.id!r} "
+                             f"(its card, [[parameters]] physical)", field=f"{name}.bounds")
+
+
+def prior_groups(priors):
+    """The priors of a vector of parameters (a sequence of :class:`Prior`, one per column)
+    grouped by family for one vectorised call each: tuples (log-density of
+    :data:`LOG_DENSITIES`, columns (m,), arguments {name: (m,) array}); uniform priors, constant
+    inside their bounds, need no evaluation."""
+    groups = {}
+    for j, p in enumerate(priors):
+        groups.setdefault(p.dist, []).append(j)
+    out = []
+    for dist, cols in groups.items():
+        if dist == "uniform":
+            continue
+        members = [priors[j] for j in cols]
+        args = {k: np.array([p.args[k] for p in members]) for k in members[0].args}
+        out.append((LOG_DENSITIES[dist], np.array(cols), args))
+    return tuple(out)
 
 
 def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet:
