@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from skinfit.errors import InputError
-from skinfit.inference.checkpoint import Checkpoint, load_checkpoint, map_from_record, run_identity
+from skinfit.inference.checkpoint import Checkpoint, load_checkpoint, run_identity
 from skinfit.inference.guardrails import assess_run
 from skinfit.inference.optimize import MAPResult, find_map, laplace_covariance
 from skinfit.inference.proposal import MixtureT
@@ -136,7 +136,7 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     if saved is None:
         map_result, proposal, p0, rounds = start(post, rng, nwalkers=nwalkers, n_global=n_global, n_local=n_local)
     else:
-        map_result, proposal, p0 = map_from_record(saved.map), MixtureT.from_dict(saved.proposal), saved.p0
+        map_result, proposal, p0 = MAPResult.from_record(saved.map), MixtureT.from_dict(saved.proposal), saved.p0
         rounds = saved.importance
         rng.bit_generator.state = saved.generator_state
     t_start_s = time.perf_counter() - t_begin

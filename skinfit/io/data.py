@@ -11,18 +11,14 @@ read, up to ``$SKINFIT_MAX_DATA_MB``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping
-    from skinfit.io.models import Model
-
 import csv
 import hashlib
 import io
 import json
 import os
 import re
+import shutil
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -33,7 +29,7 @@ import pandas as pd
 from skinfit.io.toml import available, find_file, read_regular, read_toml, require
 from skinfit.io.arguments import check_path
 from skinfit.errors import InputError
-from skinfit.io.models import check_id
+from skinfit.io.models import Model, check_id, load_model
 from skinfit.io.paths import display
 from skinfit.io.units import NONNEGATIVE, parse_unit
 
@@ -315,8 +311,6 @@ def _example_unit(model, name):
 def _as_model(model):
     if model is None or not isinstance(model, str):
         return model
-    from skinfit.io.models import load_model
-
     return load_model(model)
 
 
@@ -421,8 +415,6 @@ def write_card(dataset, folder, data_name="data.csv"):
     Only for datasets read from a CSV without a card (their provenance names the source file).
     Returns the card's path.
     """
-    import shutil
-
     src = dataset.provenance.get("source_file")
     if not src:
         raise InputError(dataset.path, "only a dataset read from a CSV file can be written as a card")

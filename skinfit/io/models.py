@@ -8,29 +8,29 @@ card are SI (:func:`skinfit.io.units.check_model_unit`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    import os
-    from collections.abc import Mapping
-    import pandas as pd
-    from numpy.typing import ArrayLike
-
 import math
+import os
 import re
 import tomllib
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:  # pandas in annotations only: ``skinfit models`` does without it
+    import pandas as pd
 
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError, InputTypeError, SupportWarning
 from skinfit.io.arguments import check_mapping, shown
 from skinfit.io.forward_check import forward_error, validated
 from skinfit.io.paths import display
+from skinfit.io.references import check_source
 from skinfit.io.registry import resolve
 from skinfit.io.units import check_model_unit
 
@@ -251,8 +251,6 @@ def load_model(name: str | os.PathLike) -> Model:
 def _parse_model(path, digest):
     _, text = read_toml(path)
     model = replace(parse_model_text(text, display(path), digest), file=str(Path(path).resolve()))
-    from skinfit.io.references import check_source
-
     check_source(model.source, model.path, "source")  # keys into references.toml
     for cname, source in model.constant_sources.items():
         if source:

@@ -7,18 +7,15 @@ log-density is normalised (evidence from different models is comparable).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    import os
-
 import math
+import os
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
+from scipy import special
 
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError
@@ -33,7 +30,7 @@ __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for"
 def _stats():
     """scipy.stats, imported on first use (~0.5 s): a saved fit's priors are read, and its trace
     and corner plots drawn, from their bounds alone (:func:`parse_prior` with ``check_mass=False``)."""
-    from scipy import stats
+    from scipy import stats  # here, not with the module: see the docstring (tests/test_startup.py)
 
     return stats
 
@@ -93,8 +90,6 @@ class Prior:
         if hi - lo < 1e-12:  # both in one tail: use survival functions
             lo, hi = f.logsf(self.upper), f.logsf(self.lower)
         if hi - lo < 1e-12:  # bounds narrow beside the spread: the density is flat there (Simpson)
-            from scipy import special
-
             a, b = self.lower, self.upper
             return float(special.logsumexp(f.logpdf([a, 0.5 * (a + b), b]), b=[1.0, 4.0, 1.0])
                          + math.log((b - a) / 6.0))
