@@ -9,7 +9,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import special
 
 from skinfit.errors import InputError
 from skinfit.io.data import check_units
@@ -377,6 +376,10 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
+                        # here, not with the module: scipy (~0.2 s) only for Student-t noise; reading
+                        # and reporting saved fits rebuild posteriors without it (tests/test_population.py)
+                        from scipy import special
+
                         nu = self._noise_param(theta, "nu", o)
                         value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
                                  - 0.5 * np.log(nu * math.pi) - np.log(sigma) - 0.5 * (nu + 1) * np.log1p(r * r / nu))

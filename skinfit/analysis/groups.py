@@ -38,9 +38,7 @@ import pandas as pd
 from skinfit.io.arguments import check_input_file, check_path, size_text
 from skinfit.io.data import Dataset, load_dataset
 from skinfit.errors import InputError, error_line
-from skinfit.inference.run import resolve_inputs
 from skinfit.results.fit import load_fit
-from skinfit.results.fitting import fit
 from skinfit.io.provenance import input_lines, input_record
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "check_name", "inside", "check_out_dir",
@@ -198,6 +196,10 @@ def fit_by(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, n
         first group's exception is raised (after the index lists them all).
     """
     from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps
+    # the fitting machinery (emcee, nlopt, ArviZ's tree builder) here, not with the module:
+    # reading a run (load_groups, reports, population) does without it
+    from skinfit.inference.run import resolve_inputs
+    from skinfit.results.fitting import fit
 
     from_file = not isinstance(dataset, Dataset)  # else it may be a subset: its hash is not the file's
     dataset = load_dataset(dataset) if from_file else dataset

@@ -15,7 +15,6 @@ from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
-from scipy import special
 
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError
@@ -90,6 +89,8 @@ class Prior:
         if hi - lo < 1e-12:  # both in one tail: use survival functions
             lo, hi = f.logsf(self.upper), f.logsf(self.lower)
         if hi - lo < 1e-12:  # bounds narrow beside the spread: the density is flat there (Simpson)
+            from scipy import special  # with scipy.stats (frozen above), never on a path without it
+
             a, b = self.lower, self.upper
             return float(special.logsumexp(f.logpdf([a, 0.5 * (a + b), b]), b=[1.0, 4.0, 1.0])
                          + math.log((b - a) / 6.0))
