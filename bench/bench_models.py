@@ -8,7 +8,7 @@ of issue 7 (electroadhesion with uniform priors on the paper's Table I ranges,
 bench/priors_electroadhesion_uniform.toml).  In one process, one after another:
 
 * ``skinfit.fit`` with its defaults (MAP, sampling to its own gate, the result tree), and
-  apart the pointwise log-likelihood and predictive draws it computes on first use;
+  apart the pointwise log-likelihood and predictive draws (``complete=False``, then ``Fit.complete``);
 * the same chain by a bare emcee loop (:func:`common.run_bare_emcee`): skinfit's overhead at
   equal ESS, from ``--pairs`` runs of both, alternating, the fastest of each (runs of
   0.2-0.3 s varied by -1% to +39% in single pairs on this shared machine);
@@ -166,7 +166,7 @@ def bench(name, args, old):
              "chains; dynesty: Kish ESS of its weights, R-hat over 4 random quarters of its equal-weight resample). "
              "Wall time includes the MAP search (emcee methods), compilation (PyMC) and the result tree "
              "(skinfit: to the converged posterior; its pointwise log-likelihood and predictive draws, computed "
-             f"on first use, took {sk.extra['pointwise_s']:.2f} s more). One process, one run, methods one after "
+             f"apart, took {sk.extra['pointwise_s']:.2f} s more). One process, one run, methods one after "
              "another; every library imported and a short untimed fit run first.", "", "\n".join(table_lines) + carried, "",
              "## Log-density throughput (evaluations/s; same posterior draws, values checked equal)", "",
              "| walkers | skinfit `Posterior.__call__` | one fused numpy expression | fused / skinfit |",

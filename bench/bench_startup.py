@@ -32,7 +32,7 @@ from common import machine_info, machine_text, user_env  # noqa: E402
 PY = sys.executable
 NO_DASK = "import sys; sys.modules['dask'] = None; "
 #: the third-party packages ``skinfit fit`` imports (emcee and arviz_stats import scipy.stats;
-#: xarray's imports of dask and pint are deferred by skinfit.results._xarray until something uses them)
+#: xarray imports dask.array and pint, when installed, on the first array it builds)
 LIBRARIES = ("numpy", "pandas", "xarray", "scipy.stats", "emcee", "nlopt", "h5py", "h5netcdf", "arviz_base",
              "arviz_stats")
 

@@ -36,7 +36,7 @@ def _expect(post, names, transforms, noise):
 
 def _prior(post):
     """``(lp, lo, hi)``: the normalised log prior without its bounds check, as a closure over
-    per-family column groups (the closed forms of skinfit.io.priors._LOGPDF), and the bounds."""
+    per-family column groups (the closed forms of skinfit.io.priors.LOG_DENSITIES), and the bounds."""
     sq, ln, lg, lin, l1p = [], [], [], [], []  # (column, arguments)
     for j, s in enumerate(post.slots):
         a = s.prior.args

@@ -1,4 +1,4 @@
-"""Calibration and power of a fit's warnings: the misfit check (skinfit.analysis.misfit) and every guard
+"""Calibration and power of a fit's warnings: the misfit check (skinfit.inference.misfit) and every guard
 rail ``skinfit fit --strict`` acts on (skinfit.inference.guardrails), issue 21 class 8 and issue 39.
 
     python bench/misfit.py                                  # 34 fits per model card (102 per family)
@@ -40,7 +40,8 @@ from scipy import stats
 import skinfit
 from skinfit import __version__
 from skinfit.inference.guardrails import BOUND_ALPHA
-from skinfit.analysis.misfit import ALPHA, check_fit, simulated_check
+from skinfit.analysis.misfit import simulated_check
+from skinfit.inference.misfit import ALPHA, check_fit
 from skinfit.io.models import load_model
 from skinfit.posterior import Posterior
 
@@ -125,7 +126,7 @@ def _autocorrelated(seed, phi, n):
 
 
 def _check_cost(rows=(1_000, 10_000, 100_000), draws=2000):
-    """Seconds of :func:`skinfit.analysis.misfit.check_fit` alone (its predictions and statistics, no
+    """Seconds of :func:`skinfit.inference.misfit.check_fit` alone (its predictions and statistics, no
     PSIS) on series of ``rows`` rows with a time column (m = 6 checks, 900 draws)."""
     model = skinfit.load_model("electroadhesion_empirical")
     out = []

@@ -19,7 +19,7 @@ _PUBLIC = {
     "PriorSet": "skinfit.io.priors", "load_priors": "skinfit.io.priors", "list_priors": "skinfit.io.priors",
     "Dataset": "skinfit.io.data", "load_dataset": "skinfit.io.data", "list_datasets": "skinfit.io.data",
     # fitting and its result
-    "fit": "skinfit.results.fit", "Fit": "skinfit.results.fit", "load_fit": "skinfit.results.fit",
+    "fit": "skinfit.results.fitting", "Fit": "skinfit.results.fit", "load_fit": "skinfit.results.fit",
     # analyses of fits
     "evidence": "skinfit.analysis.evidence", "compare": "skinfit.analysis.compare",
     "fit_by": "skinfit.analysis.groups", "load_groups": "skinfit.analysis.groups",
@@ -33,7 +33,7 @@ _PUBLIC = {
     "InputError": "skinfit.errors", "InputTypeError": "skinfit.errors", "ForwardError": "skinfit.errors",
     "MissingDependency": "skinfit.errors", "WorkerError": "skinfit.errors",
     "ConvergenceWarning": "skinfit.errors", "SupportWarning": "skinfit.errors", "IntegrityWarning": "skinfit.errors",
-    "MisfitWarning": "skinfit.analysis.misfit", "PopulationWarning": "skinfit.analysis.population.result",
+    "MisfitWarning": "skinfit.inference.misfit", "PopulationWarning": "skinfit.analysis.population.result",
     "ShadowWarning": "skinfit.io.provenance",
 }
 

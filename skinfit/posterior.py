@@ -10,45 +10,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from skinfit.io.labels import noise_suffix
-from skinfit.io.units import to_si
-
-from skinfit.io.arguments import check_mapping, shown
-from skinfit.errors import InputError, InputTypeError
+from skinfit.errors import InputError
 from skinfit.io.data import check_units
 from skinfit.io.forward_check import check_forward, check_quantiles, forward_error
-from skinfit.io.models import NOISE_MODELS, resolve_forward as _resolve
-from skinfit.io.priors import check_priors_for
-from skinfit.io.priors import _LOGPDF
+from skinfit.io.labels import level_labels, noise_parameter_names, noise_suffix
+from skinfit.io.models import resolve_constants, resolve_forward, resolve_noise, resolve_split
+from skinfit.io.priors import check_physical, check_priors_for, prior_groups
 
-__all__ = ["Posterior", "Slot", "noise_parameter_names"]
+__all__ = ["Posterior", "Slot"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-def noise_parameter_names(observables, noise):
-    """Names of the noise parameters: ``sigma`` (+ ``nu``), suffixed when several observables."""
-    names = []
-    for obs in observables:
-        suffix = noise_suffix(observables, obs)
-        names.append(f"sigma{suffix}")
-        if noise[obs] == "student_t":
-            names.append(f"nu{suffix}")
-    return names
-
-
-def _check_physical(model, priors, noise_names):
-    """Refuse a prior whose bounds leave the range the physics allows: the model card's
-    ``physical = [lower, upper]`` of each parameter, and [0, inf] for noise scales and
-    Student-t degrees of freedom."""
-    ranges = {q.name: q.physical for q in model.parameters}
-    ranges.update({n: (0.0, math.inf) for n in noise_names})
-    for name, (lo, hi) in ranges.items():
-        prior = priors[name]
-        if prior.lower < lo or prior.upper > hi:
-            raise InputError(priors.path or "priors", f"bounds [{prior.lower:g}, {prior.upper:g}] leave the "
-                             f"physical range [{lo:g}, {hi:g}] of {name} declared by model {model.id!r} "
-                             f"(its card, [[parameters]] physical)", field=f"{name}.bounds")
 
 
 @dataclass(frozen=True)
@@ -113,10 +84,7 @@ class Posterior:
 
     CHUNK = 256  # parameter vectors per forward call (memory bound)
     #: (parameter vector, distinct row) cells per forward call: calls on more are split into
-    #: equal blocks, so that the (k, rows) temporaries stay in cache.  Electroadhesion on
-    #: 1600 distinct rows, 96 parameter vectors (an independence step of 32 walkers): 75 us
-    #: a vector in one call, 64 in blocks of 64, 25.5 in blocks of 48; on 800 rows 29 in
-    #: one call, 13.4 in blocks of 64 (best of 3 runs each).
+    #: equal blocks, so that the (k, rows) temporaries stay in cache (docs/design/sampling.md).
     EVAL_CELLS = 49152
 
     def __init__(self, model, priors, dataset, *, split=None, noise=None, constants=None):
@@ -129,30 +97,8 @@ class Posterior:
         if not self.observables:
             raise InputError(dataset.path, f"no observable of model {model.id!r} in the data "
                              f"(expected a column {' or '.join(map(repr, model.observable_names))})")
-        card_noise = {o.name: o.noise for o in model.observables}
-        if noise is None or isinstance(noise, str):
-            noise = {o: noise or card_noise[o] for o in self.observables}
-        else:
-            check_mapping(noise, where, "noise", "a noise model name or a mapping observable -> noise model")
-            unknown = set(noise) - set(self.observables)
-            if unknown:
-                raise InputError(where, f"no observable {sorted(map(str, unknown))} in the data (observables: "
-                                 f"{', '.join(self.observables)})", field="noise")
-            noise = {o: noise.get(o, card_noise[o]) for o in self.observables}
-        for o, kind in noise.items():
-            if kind not in NOISE_MODELS:
-                raise InputError(where, f"unknown noise model {kind!r} for {o} (expected one of "
-                                 f"{', '.join(NOISE_MODELS)})", field="noise")
-        self.noise = noise
-        from skinfit.io.models import check_constant
-
-        check_mapping(constants, where, "constants", "a mapping constant name -> number")
-        self.constants = {**model.constants, **{k: check_constant(k, v, where) if k in model.constants else v
-                                                for k, v in (constants or {}).items()}}
-        unknown = set(constants or {}) - set(model.constants)
-        if unknown:
-            raise InputError(where, f"unknown constants {sorted(unknown)} (model constants: "
-                             f"{', '.join(model.constants)})", field="constants")
+        self.noise = noise = resolve_noise(model, self.observables, noise, where)
+        self.constants = resolve_constants(model, constants, where)
 
         # covariates and observed values (SI, float arrays of shape (n,))
         self.x = {}
@@ -183,35 +129,19 @@ class Posterior:
         self._sum_logy = {o: float(v.sum()) for o, v in self._logy.items()}
 
         # which sampled slot feeds each parameter
-        split = dict(model.split if split is None else
-                     check_mapping(split, where, "split", "a mapping parameter -> column or list of columns"))
-        self.split = {}
-        for pname, cols in split.items():
-            if not (isinstance(cols, str) or isinstance(cols, (list, tuple))
-                    and cols and all(isinstance(c, str) for c in cols)):
-                raise InputTypeError(where, f"expected {pname} = a column name or a list of column names "
-                                     f"(got {shown(cols)})", field="split")
-            if pname not in model.parameter_names:
-                raise InputError(where, f"cannot split unknown parameter {pname!r} (parameters: "
-                                 f"{', '.join(model.parameter_names)})", field="split")
-            cols = (cols,) if isinstance(cols, str) else tuple(cols)
-            for c in cols:
-                if c not in frame.columns:
-                    raise InputError(where, f"cannot split {pname!r} by {c!r}: no such column in "
-                                     f"{dataset.path}", field="split")
-            self.split[pname] = cols
+        self.split = resolve_split(model, split, dataset, where)
         self.noise_names = tuple(noise_parameter_names(self.observables, noise))
         needed = list(model.parameter_names) + list(self.noise_names)
         missing = [p for p in needed if p not in priors]
         if missing:
             raise InputError(priors.path or "priors", f"no prior for {', '.join(missing)} "
                              f"(model {model.id!r} needs priors for {', '.join(needed)})")
-        _check_physical(model, priors, self.noise_names)
+        check_physical(model, priors, self.noise_names)
         slots, self._param_index, self.levels = [], {}, {}
         for pname in needed:
             prior = priors[pname]
             if pname in self.split:
-                labels = _level_labels(frame, self.split[pname], dataset)
+                labels = level_labels(frame, self.split[pname], dataset)
                 levels = list(dict.fromkeys(labels))  # order of appearance
                 codes = np.array([levels.index(v) for v in labels])
                 self.levels[pname] = (self.split[pname], tuple(levels))
@@ -231,7 +161,7 @@ class Posterior:
         self.ndim = len(self.slots)
         self._lo = np.array([s.lo for s in self.slots])
         self._hi = np.array([s.hi for s in self.slots])
-        self._prior_groups = _prior_groups(self.slots)
+        self._prior_groups = prior_groups([s.prior for s in self.slots])
         self._log_norm = float(sum(s.prior._log_norm for s in self.slots))
         self.counts = {"evaluations": 0, "outside_prior": 0, "outside_support": 0}
         self._check_forward()
@@ -249,9 +179,7 @@ class Posterior:
         """Repeated measurements: the forward model runs once per distinct row (covariates and
         levels of split parameters), and the normal / log-normal likelihood of a row group
         needs only its count, mean and within-group sum of squares:
-        ``sum_i (y_i - mu)^2 = SS_within + n_u (ybar_u - mu)^2`` exactly (no cancellation).
-        On the shipped datasets: 216 -> 108 rows (electroadhesion), 456 -> 228 (textured),
-        1638 -> 42 (contact_area), 252 -> 84 (ultrasonic); wavy has none repeated."""
+        ``sum_i (y_i - mu)^2 = SS_within + n_u (ybar_u - mu)^2`` exactly (no cancellation)."""
         cols = [np.ascontiguousarray(v, dtype=float).view(np.int64) for v in self.x.values()]
         cols += [np.asarray(j) for j in self._param_index.values() if not isinstance(j, int)]
         keys = np.column_stack(cols) if cols else np.zeros((self.n, 1), dtype=np.int64)
@@ -288,7 +216,7 @@ class Posterior:
         shared = {p: j for p, j in self._param_index.items() if isinstance(j, int)}
         shift = np.zeros(len(slots))
         for pname, ref in model.shift.items():
-            c = float(_resolve(ref, model.path, "shift")(self.constants))
+            c = float(resolve_forward(ref, model.path, "shift")(self.constants))
             for j, slot in enumerate(slots):
                 if slot.base == pname and slot.transform == "log" and c > 0 and slot.lo + c > 0:
                     slots[j] = replace(slot, transform="shift_log")
@@ -305,7 +233,7 @@ class Posterior:
         self._shifted = np.flatnonzero(shift)
         self._shift = shift[self._shifted]  # theta = c*expm1(z - log c): exactly 0 at z = log c
         self._log_shift = np.log(self._shift)
-        self._shear = tuple((j, _resolve(ref, model.path, "shear")) for pname, ref in model.shear.items()
+        self._shear = tuple((j, resolve_forward(ref, model.path, "shear")) for pname, ref in model.shear.items()
                             if (j := shared.get(pname)) is not None and slots[j].transform == "log")
         self._sheared = {slots[j].base for j, _ in self._shear}
         return tuple(slots)
@@ -388,9 +316,7 @@ class Posterior:
 
         Keeps the forward model's arrays in cache, and bounds memory where a model's forward
         function works on larger arrays than (k, n) (the ultrasonic period average with a
-        parameter split by a column takes its per-row values to every quadrature node,
-        (k, 6734) on the shipped rows: 2000 prior draws peak at 336 MB of numpy arrays in one
-        call, 47 MB in blocks; with shared parameters 13 and 2 MB).
+        parameter split by a column takes its per-row values to every quadrature node).
         """
         k = len(theta)
         most = min(self.CHUNK, max(16, self.EVAL_CELLS // self.n_unique))
@@ -450,7 +376,9 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
-                        from scipy import special  # here, not with the module (a report imports it, needing no scipy)
+                        # here, not with the module: scipy (~0.2 s) only for Student-t noise; reading
+                        # and reporting saved fits rebuild posteriors without it (tests/test_population.py)
+                        from scipy import special
 
                         nu = self._noise_param(theta, "nu", o)
                         value = (special.gammaln(0.5 * (nu + 1)) - special.gammaln(0.5 * nu)
@@ -520,9 +448,8 @@ class Posterior:
 
         For the result tree of a fit (thousands of draws x every row): evaluated in blocks of
         :attr:`BLOCK_CELLS` (draw, row) cells that stay in cache, writing straight into the two
-        outputs, with no (draws, rows) prediction arrays (contact_area, 3880 draws x 1638 rows
-        x 2 observables: 0.36-0.56 s -> 0.23 s, of which 0.13 s are the normal draws; a third
-        less memory).  Rows of ``theta`` outside the physical support raise ``ValueError``.
+        outputs, with no (draws, rows) prediction arrays.  Rows of ``theta`` outside the
+        physical support raise ``ValueError``.
         """
         theta = np.atleast_2d(theta)
         k = len(theta)
@@ -538,8 +465,7 @@ class Posterior:
                 self._observe(simulated[o][i:i + step], pred[o], block, o)
         return ll, simulated
 
-    #: (draw, row) cells per block of :meth:`replicate` (1 MB of float64 per array; 0.23 s
-    #: against 0.25 s at 256 kB and 0.35 s at 64 kB on the contact_area tree).
+    #: (draw, row) cells per block of :meth:`replicate` (1 MB of float64 per array).
     BLOCK_CELLS = 131072
 
     def _require_valid(self, valid):
@@ -638,39 +564,22 @@ class Posterior:
         return np.column_stack([s.prior.ppf(u[:, j]) for j, s in enumerate(self.slots)])
 
     def sample_prior(self, size, rng):
+        """``size`` draws from the prior, natural parameters (size, d)."""
         return self.prior_transform(rng.uniform(size=(size, self.ndim)))
+
+    def prior_draw_in_support(self, rng, batch=64, max_batches=200):
+        """One prior draw inside the model's physical support, natural parameters (d,): the
+        first valid one of batches of ``batch`` prior draws (the truth of a simulation: SBC,
+        the misfit check's calibration). RuntimeError after ``max_batches`` batches."""
+        for _ in range(max_batches):
+            theta = self.sample_prior(batch, rng)
+            _, _, valid = self.pointwise(theta)
+            if valid.any():
+                return theta[int(np.argmax(valid))]
+        raise RuntimeError(f"{self.model.id}: no prior draw inside the physical support in "
+                           f"{batch * max_batches} tries ({self.model.support})")
 
     def describe(self):
         return {"parameters": list(self.names), "observables": list(self.observables),
                 "noise": dict(self.noise), "split": {p: list(c) for p, c in self.split.items()},
                 "n_rows": self.n}
-
-
-def _prior_groups(slots):
-    """Slots grouped by prior family: (log-density without its constant, columns, argument
-    arrays); uniform priors, constant inside their bounds, need no evaluation."""
-    groups = {}
-    for j, s in enumerate(slots):
-        groups.setdefault(s.prior.dist, []).append(j)
-    out = []
-    for dist, cols in groups.items():
-        if dist == "uniform":
-            continue
-        priors = [slots[j].prior for j in cols]
-        args = {k: np.array([p.args[k] for p in priors]) for k in priors[0].args}
-        out.append((_LOGPDF[dist], np.array(cols), args))
-    return tuple(out)
-
-
-def _level_labels(frame, cols, dataset):
-    parts = []
-    for c in cols:
-        values = frame[c]
-        try:
-            unit = dataset.column(c).unit
-        except KeyError:
-            unit = None
-        if unit is not None:
-            values = [f"{v / to_si(unit):g}" for v in values.to_numpy(dtype=float)]
-        parts.append([str(v) for v in values])
-    return [",".join(t) for t in zip(*parts)]

@@ -16,7 +16,7 @@ import pytest
 import skinfit
 from skinfit.inference.checkpoint import Checkpoint, load_checkpoint
 from skinfit.errors import InputError
-from skinfit.results.fit import as_generator
+from skinfit.io.arguments import as_generator
 from skinfit.inference.optimize import MAPResult, laplace_covariance
 from skinfit.posterior import Posterior
 from skinfit.inference.proposal import MixtureT

@@ -20,7 +20,9 @@ from skinfit.errors import InputError
 from skinfit.inference.optimize import MAPError
 from skinfit.posterior import Posterior
 
-fit_module = importlib.import_module("skinfit.results.fit")
+run_module = importlib.import_module("skinfit.inference.run")
+fitting_module = importlib.import_module("skinfit.results.fitting")
+store_module = importlib.import_module("skinfit.results.store")
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA_DIR = ROOT / "datasets" / "electroadhesion_synthetic"
 MODEL = "electroadhesion_coulomb"  # the cheapest model on the shipped electroadhesion data
@@ -59,10 +61,10 @@ def test_class5_pointwise_groups_thinned_to_the_memory_budget(monkeypatch, tmp_p
     """4320 rows; the available memory patched so that all draws need 6.5x the budget: every
     7th draw of each walker is kept, the note is in the text and the file, and LOO, the
     misfit check and a save/load still work on the kept draws."""
-    fit = _quiet_fit(MODEL, _large_rows(20), rng=1)
-    nw, nd = fit._deferred.nwalkers, fit._deferred.ndraws
-    need = fit_module.pointwise_bytes(1, 4320, nw * nd)
-    monkeypatch.setattr(fit_module, "available_memory", lambda: need / 6.5 / fit_module.MEMORY_FRACTION)
+    fit = _quiet_fit(MODEL, _large_rows(20), rng=1, complete=False)
+    nw, nd = fit.attr("sampler")["nwalkers"], fit.group("posterior").sizes["draw"]
+    need = run_module.pointwise_bytes(1, 4320, nw * nd)
+    monkeypatch.setattr(run_module, "available_memory", lambda: need / 6.5 / run_module.MEMORY_FRACTION)
     with pytest.warns(UserWarning, match="on every 7th draw of each walker"):
         fit.complete()
     ll = fit.group("log_likelihood")
@@ -79,10 +81,10 @@ def test_class5_pointwise_groups_thinned_to_the_memory_budget(monkeypatch, tmp_p
 
 
 def test_class5_one_draw_of_every_jth_walker_when_a_draw_per_walker_is_over_budget(monkeypatch):
-    fit = _quiet_fit(MODEL, _large_rows(20), rng=1)
-    nw = fit._deferred.nwalkers
-    per_draw = fit_module.pointwise_bytes(1, 4320, 1)
-    monkeypatch.setattr(fit_module, "available_memory", lambda: per_draw * 5.5 / fit_module.MEMORY_FRACTION)
+    fit = _quiet_fit(MODEL, _large_rows(20), rng=1, complete=False)
+    nw = fit.attr("sampler")["nwalkers"]
+    per_draw = run_module.pointwise_bytes(1, 4320, 1)
+    monkeypatch.setattr(run_module, "available_memory", lambda: per_draw * 5.5 / run_module.MEMORY_FRACTION)
     with pytest.warns(UserWarning, match=rf"one draw of every {-(-nw // 5)}th walker"):
         fit.complete()
     ll = fit.group("log_likelihood")
@@ -92,8 +94,8 @@ def test_class5_one_draw_of_every_jth_walker_when_a_draw_per_walker_is_over_budg
 
 
 def test_class5_refused_before_the_map_when_one_draw_is_over_budget(monkeypatch):
-    monkeypatch.setattr(fit_module, "available_memory", lambda: 100_000.0)
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "available_memory", lambda: 100_000.0)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(InputError, match=r"one posterior draw's .* would need 0\.1 MiB \(4320 rows x 1 observable"):
         skinfit.fit(MODEL, _large_rows(20), rng=1)
 
@@ -136,7 +138,7 @@ def test_class6_full_disk_before_the_save_keeps_the_previous_file(saved_fit, mon
     fit, path = saved_fit
     before = path.read_bytes()
     usage = shutil.disk_usage(path.parent)
-    monkeypatch.setattr(fit_module.shutil, "disk_usage", lambda p: usage._replace(free=4096))
+    monkeypatch.setattr(store_module.shutil, "disk_usage", lambda p: usage._replace(free=4096))
     with pytest.raises(OSError, match=r"no space to save the fit: .* MiB needed, 0\.0 MiB free"):
         fit.save(path)
     assert path.read_bytes() == before and sorted(p.name for p in path.parent.iterdir()) == ["fit.nc"]
@@ -160,7 +162,7 @@ def test_class6_disk_full_during_the_write_keeps_the_previous_file(saved_fit, mo
         def write(self, data):
             raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(fit_module.os, "fdopen", lambda fd, mode: Full(real(fd, mode)))
+    monkeypatch.setattr(store_module.os, "fdopen", lambda fd, mode: Full(real(fd, mode)))
     with pytest.raises(OSError, match=r"cannot write: No space left on device"):
         fit.save(path)
     assert path.read_bytes() == before and sorted(p.name for p in path.parent.iterdir()) == ["fit.nc"]
@@ -205,7 +207,7 @@ def test_class6_read_only_run_directory_gives_one_line(saved_fit, tmp_path, caps
     def read_only(*args, **kwargs):
         raise PermissionError(30, "Read-only file system", str(run / "checkpoint.h5"))
 
-    monkeypatch.setattr(fit_module, "fit", _no_fit)
+    monkeypatch.setattr(fitting_module, "fit", _no_fit)
     monkeypatch.setattr(importlib.import_module("skinfit.inference.checkpoint").CheckpointLock, "__enter__", read_only)
     assert main(["fit", MODEL, "electroadhesion_synthetic", "--out", str(run), "--quiet", "--overwrite"]) == 2
     err = capsys.readouterr().err
@@ -223,7 +225,7 @@ def test_class6_read_only_run_directory_gives_one_line(saved_fit, tmp_path, caps
     (["--checkpoint-every", "0"], "--checkpoint-every: expected a finite number > 0"),
 ])
 def test_class6_odd_cli_numbers_exit_2_with_one_error_line(tmp_path, capsys, monkeypatch, args, match):
-    monkeypatch.setattr(fit_module, "fit", _no_fit)
+    monkeypatch.setattr(fitting_module, "fit", _no_fit)
     with pytest.raises(SystemExit) as exc:
         main(["fit", MODEL, "electroadhesion_synthetic", "--out", str(tmp_path / "r"), *args])
     assert exc.value.code == 2
@@ -238,7 +240,7 @@ def test_class6_odd_cli_numbers_exit_2_with_one_error_line(tmp_path, capsys, mon
     ({"ess_target": float("nan")}, "ess_target: expected a finite number > 0"),
 ])
 def test_class6_fit_refuses_odd_settings_before_the_map(monkeypatch, kwargs, match):
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(InputError, match=match):
         skinfit.fit(MODEL, "electroadhesion_synthetic", **kwargs)
 
@@ -261,6 +263,6 @@ def test_class6_prior_bounds_1e13_apart_refused(tmp_path, monkeypatch):
     text = (ROOT / "priors" / f"{MODEL}.toml").read_text().replace("bounds = [0.0, 2.0]",
                                                                    "bounds = [0.5, 0.5000000000001]")
     (tmp_path / "p.toml").write_text(text)
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(InputError, match=r"p\.toml: mu\.bounds: bounds \[0\.5, 0\.5000000000001\] are 1e-13 apart"):
         skinfit.fit(MODEL, "electroadhesion_synthetic", priors=str(tmp_path / "p.toml"))

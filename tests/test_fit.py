@@ -14,6 +14,7 @@ from scipy import optimize, stats
 import skinfit
 from skinfit import integrity
 from skinfit.errors import InputError
+from skinfit.io import integrity
 from pointwise import check_pointwise_groups
 from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
@@ -100,7 +101,7 @@ def test_a_fit_whose_summary_fails_is_saved_without_it(ea_fit, tmp_path, monkeyp
     path = ea_fit.save(tmp_path / "fit.nc")
     tree = xr.open_datatree(path).load()
     del tree.attrs["summary"]
-    integrity.stamp(tree)  # the checksums of the edited content: a file another writer left, not damage
+    integrity.stamp(tree)  # the file without a stored summary, with the checksums of its content
     tree.to_netcdf(tmp_path / "bare.nc", engine="h5netcdf")
     fit_module = importlib.import_module("skinfit.results.fit")
 
@@ -124,7 +125,7 @@ def test_a_stored_summary_is_never_shown_for_other_draws_or_records(ea_fit, tmp_
     stored = tree.attrs["summary"]
     tree["posterior"]["alpha"].values[...] *= 2.0
     tree.attrs["summary"] = stored  # the old table kept beside new draws
-    integrity.stamp(tree)  # an edit by another writer (its content checksummed), not damage
+    integrity.stamp(tree)  # as another tool that rewrote the file with its checksums would leave it
     tree.to_netcdf(tmp_path / "edited.nc", engine="h5netcdf")
     edited = skinfit.load_fit(tmp_path / "edited.nc")
     assert not edited.summary_stored
@@ -187,20 +188,21 @@ def test_save_load_identical(ea_fit, tmp_path):
 
 
 def test_same_seed_identical_samples_whenever_the_pointwise_groups_are_computed():
-    """One fit's pointwise groups computed at once, the other's after another fit, its groups
-    and unrelated random draws: bit for bit the same; a Generator passed in is advanced by the
-    fit alone (as a fit from the same seed advances its own), not by the pointwise groups."""
+    """One fit complete as skinfit.fit returns it, the other made pending (complete=False) and
+    completed after another fit, its groups and unrelated random draws: bit for bit the same,
+    with the same check of the fit to the data; a Generator passed in is advanced by the fit
+    alone (as a fit from the same seed advances its own), not by the pointwise groups."""
     generator = np.random.default_rng(7)
     a = _short_fit(rng=generator)
     after_fit = generator.bit_generator.state
-    a.idata
-    assert not a.pending and generator.bit_generator.state == after_fit
+    assert not a.pending and "pointwise_s" in a.attr("timings") and a.attr("misfit")["checks"]
     b_generator = np.random.default_rng(7)
-    b = _short_fit(rng=b_generator)
+    b = _short_fit(rng=b_generator, complete=False)
     assert b.pending and b_generator.bit_generator.state == after_fit
     c = _short_fit(rng=8)
-    c.idata
     np.random.default_rng(0).standard_normal(1000), np.random.standard_normal(1000)
+    b.complete()
+    assert not b.pending and b.attrs["misfit"] == a.attrs["misfit"] and b.warnings == a.warnings
     for group, var in [("posterior", "E_star"), ("sample_stats", "lp"), ("log_likelihood", "tangential_force"),
                        ("posterior_predictive", "tangential_force")]:
         np.testing.assert_array_equal(a.idata[group][var].values, b.idata[group][var].values)
@@ -212,17 +214,28 @@ def test_pointwise_groups_agree_with_the_posterior(ea_fit):
     check_pointwise_groups(ea_fit)
 
 
-def test_pointwise_groups_wait_for_first_use_and_are_saved(tmp_path):
-    """A fresh fit's summaries, provenance, diagnostics and evidence leave the pointwise groups
-    pending; saving computes them; the evidence cached before is kept through both."""
-    fit = _short_fit(rng=5)
+def test_a_fit_made_pending_is_completed_by_one_explicit_call_never_by_a_property(tmp_path):
+    """A fit made with complete=False: its summaries, provenance, diagnostics and evidence
+    leave the pointwise groups pending; ``idata`` and the pointwise groups raise one line naming
+    ``fit.complete()``, computing, checking and warning nothing; saving completes it; the
+    evidence cached before is kept through both."""
+    fit = _short_fit(rng=5, complete=False)
     assert fit.pending and "pointwise_s" not in fit.attr("timings")
+    attrs = dict(fit.attrs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for read in (lambda: fit.idata, lambda: fit.group("log_likelihood"),
+                     lambda: fit.group("posterior_predictive")):
+            with pytest.raises(RuntimeError, match=r"call fit\.complete\(\) first") as caught:
+                read()
+            assert "\n" not in str(caught.value)
+    assert fit.pending and dict(fit.attrs) == attrs and "misfit" not in fit.attrs
     fit.summary(), fit.diagnostics(), fit.attr("sampler"), fit.map, fit.warnings, fit.converged, repr(fit)
     assert fit.model_id == "electroadhesion" and fit.dataset_id == "electroadhesion_synthetic"
     assert fit.attrs["seed"] == 5 and fit.group("posterior").sizes["chain"] == fit.attr("sampler")["nwalkers"]
-    assert fit.report_text().count("pointwise log-likelihood and predictive draws deferred until first use") == 1
+    assert fit.report_text().count("pointwise log-likelihood and predictive draws not computed yet") == 1
     diagnostics, _ = fit_diagnostics(fit)
-    assert diagnostics.loc["wall time [s]", "criterion"].endswith("deferred until first use")
+    assert diagnostics.loc["wall time [s]", "criterion"].endswith("not computed yet")
     laplace = skinfit.evidence(fit, method="laplace")
     assert fit.pending and set(fit.group("posterior").data_vars) == set(TRUTH)
 
@@ -230,8 +243,7 @@ def test_pointwise_groups_wait_for_first_use_and_are_saved(tmp_path):
     assert not fit.pending
     timings = fit.attr("timings")
     assert timings["pointwise_s"] > 0 and timings["tree_s"] > 0
-    assert f"pointwise log-likelihood and predictive draws {timings['pointwise_s']:.2f} s (on first use)" \
-        in fit.report_text()
+    assert f"pointwise log-likelihood and predictive draws {timings['pointwise_s']:.2f} s" in fit.report_text()
     back = skinfit.load_fit(path)
     assert not back.pending and back.attr("timings") == timings
     assert list(back.idata.children) == list(fit.idata.children)

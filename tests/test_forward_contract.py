@@ -25,7 +25,7 @@ from skinfit.io.forward_check import CHECK_DRAWS
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 CARDS = ROOT / "examples" / "skinfit-example-plugin" / "skinfit_example_plugin" / "cards"
-fit_module = __import__("importlib").import_module("skinfit.results.fit")
+run_module = __import__("importlib").import_module("skinfit.inference.run")
 N_ROWS = 40
 
 
@@ -132,7 +132,7 @@ def _no_fit(*args, **kwargs):
 def test_class_forward_contract_broken_function_refused_before_the_map(kind, card, data_csv, monkeypatch):
     forward, message = BROKEN[kind]
     model, priors = card(f"broken_{kind}", forward)
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(ForwardError, match=rf"^{re.escape(str(model))}: forward: broken_{kind}: {message}") as info:
         skinfit.fit(str(model), str(data_csv), priors=str(priors), rng=1)
     assert "\n" not in str(info.value)
@@ -141,7 +141,7 @@ def test_class_forward_contract_broken_function_refused_before_the_map(kind, car
 def test_class_forward_contract_the_example_plugins_function_passes(card, data_csv, monkeypatch):
     """Negative control: the contract's check accepts a correct function (and the MAP starts)."""
     model, priors = card("two_term_ok", _good)
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(AssertionError, match="MAP search started"):
         skinfit.fit(str(model), str(data_csv), priors=str(priors), rng=1)
 
@@ -170,7 +170,7 @@ def test_class_forward_contract_undefined_points_marked_ok_false_are_allowed(car
         return {"tangential_force": np.where(ok, y["tangential_force"], np.nan)}, ok
 
     model, priors = card("partly_defined", partly_defined)
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(AssertionError, match="MAP search started"):
         skinfit.fit(str(model), str(data_csv), priors=str(priors), rng=1)
 

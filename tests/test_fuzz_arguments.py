@@ -26,7 +26,7 @@ import skinfit
 from skinfit.errors import InputError, InputTypeError
 
 MODEL, DATASET = "electroadhesion_coulomb", "electroadhesion_synthetic"
-fit_module = importlib.import_module("skinfit.results.fit")  # (the package attribute `skinfit.fit` is the function)
+run_module = importlib.import_module("skinfit.inference.run")
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                           HealthCheck.function_scoped_fixture])
 #: memory the size checks see (patched): 8 GiB, so that what is refused does not depend on the machine
@@ -85,8 +85,8 @@ OBJECTS = [None, {}, {"a": 1}, np.zeros(3), np.zeros((2, 2)), 5, -1, 0, 1.5, mat
 @pytest.fixture(autouse=True)
 def _no_work(monkeypatch):
     """The first expensive step of each entry point raises _WorkStarted; memory is MEMORY."""
-    monkeypatch.setattr(fit_module, "find_map", _work)
-    monkeypatch.setattr(fit_module, "available_memory", lambda: MEMORY)
+    monkeypatch.setattr(run_module, "find_map", _work)
+    monkeypatch.setattr(run_module, "available_memory", lambda: MEMORY)
     monkeypatch.setattr(importlib.import_module("skinfit.io.arguments"), "available_memory", lambda: MEMORY)
     sbc = importlib.import_module("skinfit.analysis.sbc")
     monkeypatch.setattr(sbc, "_map", _work)

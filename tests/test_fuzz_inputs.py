@@ -26,7 +26,7 @@ from skinfit.io.priors import load_priors
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA_DIR = ROOT / "datasets" / "electroadhesion_synthetic"
-fit_module = importlib.import_module("skinfit.results.fit")  # (the package attribute `skinfit.fit` is the function)
+run_module = importlib.import_module("skinfit.inference.run")
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -359,7 +359,7 @@ def test_bad_prior_refused_before_sampling(tmp_path, monkeypatch, spec, match):
     text = PRIOR_TEXT.replace('dist = "normal"\nloc = 0.5\nscale = 0.3\nbounds = [0.0, 2.0]', spec)
     assert text != PRIOR_TEXT
     path = _write(tmp_path, "p.toml", text)
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(InputError, match=rf"p\.toml: mu\.(bounds|scale).*{match}"):
         skinfit.fit(MODEL, DATASET, priors=str(path))
 
@@ -367,7 +367,7 @@ def test_bad_prior_refused_before_sampling(tmp_path, monkeypatch, spec, match):
 def test_missing_prior_refused_before_sampling(tmp_path, monkeypatch):
     start = PRIOR_TEXT.index("[d_air]")
     text = PRIOR_TEXT[:start] + PRIOR_TEXT[PRIOR_TEXT.index("[sigma]"):]
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(InputError, match=r"p\.toml: no prior for d_air"):
         skinfit.fit(MODEL, DATASET, priors=str(_write(tmp_path, "p.toml", text)))
 
@@ -377,7 +377,7 @@ def _no_fit(*args, **kwargs):
 
 
 def test_no_fit_starts_on_a_bad_data_file(tmp_path, monkeypatch):
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     csv = (DATA_DIR / "data.csv").read_text().replace("S01,0,200.000,90.8425", "S01,0,200.000,n/a!", 1)
     d = _dataset_dir(tmp_path, csv=csv.encode())
     with pytest.raises(InputError, match=r"data\.csv: column 'tangential_force', row 1: expected a number"):
@@ -397,7 +397,7 @@ def test_prior_outside_physical_range_refused_before_sampling(tmp_path, monkeypa
     """The card declares E_star, mu >= 0 (``physical = [0.0, inf]``); noise scales are >= 0."""
     assert old in PRIOR_TEXT
     path = _write(tmp_path, "p.toml", PRIOR_TEXT.replace(old, new))
-    monkeypatch.setattr(fit_module, "find_map", _no_fit)
+    monkeypatch.setattr(run_module, "find_map", _no_fit)
     with pytest.raises(InputError, match=rf"p\.toml: {name}\.bounds: .*leave the physical range {physical}"):
         skinfit.fit(MODEL, DATASET, priors=str(path))
 

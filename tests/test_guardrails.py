@@ -162,13 +162,13 @@ def _simulated_csv(path, seed):
     prior, drawn as skinfit.analysis.misfit.simulated_check draws them, written as a CSV with units in
     its header; and the fit seed simulated_check uses."""
     from skinfit.posterior import Posterior
-    from skinfit.analysis.sbc import _draw_truth, design_dataset
+    from skinfit.analysis.sbc import design_dataset
 
     model = skinfit.load_model(E2E)
     rng = np.random.default_rng(seed)
     design = design_dataset(model)
     post = Posterior(model, skinfit.load_priors(E2E), design)
-    truth = _draw_truth(post, rng)
+    truth = post.prior_draw_in_support(rng)
     y = post.simulate(truth[None], rng)["tangential_force"][0]
     design.frame.assign(tangential_force=y).rename(columns={
         "voltage": "voltage [V]", "normal_force": "normal_force [N]", "tangential_force": "tangential_force [N]"}

@@ -163,10 +163,10 @@ def test_the_checksums_are_those_every_netcdf_reader_sees(run):
     xr.testing.assert_identical(ours, tree)
     import h5netcdf
 
-    from skinfit.results.fit import _decoded
+    from skinfit.results.store import decoded
 
     with h5netcdf.File(path, "r", decode_vlen_strings=True) as h:
-        integrity.verify(path, record, groups={g: _decoded(h.groups[g]) for g in h.groups})
+        integrity.verify(path, record, groups={g: decoded(h.groups[g]) for g in h.groups})
 
 
 def test_a_fit_file_from_before_checksums_is_read_with_a_note_and_one_that_lost_them_is_refused(run, tmp_path):

@@ -1,9 +1,11 @@
-"""A saved fit's groups read with h5py directly (skinfit.results._netcdf) are exactly what h5netcdf and
-xarray read; a file of any other layout is read by h5netcdf, as before."""
+"""A saved fit reads back as xarray reads it: :func:`skinfit.load_fit` (h5netcdf and
+``xarray.decode_cf``, skinfit.results.store) gives the tree ``xarray.open_datatree`` gives, with
+the same attributes of the same Python types, for the files Fit.save writes, the layout older
+netCDF writers leave, attributes of every kind HDF5 allows, and files of other layouts (read
+whole, or refused in one line)."""
 
 import warnings
 
-import h5netcdf
 import h5py
 import numpy as np
 import pytest
@@ -11,8 +13,6 @@ import xarray as xr
 
 import skinfit
 from skinfit.io import integrity
-from skinfit.results._netcdf import NotPlain, read_groups
-from skinfit.results.fit import _decoded
 
 
 def _same_mapping(a, b, where):
@@ -27,23 +27,31 @@ def _same_mapping(a, b, where):
             assert u == w, (where, k)
 
 
-def _assert_read_as_h5netcdf_reads(path):
-    """Every group of ``path``: the same names in order, and each variable's dimensions, dtype,
-    values, attributes (with their Python types) and encoding as h5netcdf + decode_cf give."""
-    order, attrs, groups = read_groups(path, lambda g: True)
-    with h5netcdf.File(path, "r", decode_vlen_strings=True) as h:
-        assert order == list(h.groups)
-        _same_mapping(attrs, {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h.attrs.items()}, "/")
-        for g in order:
-            ours, theirs = groups[g], _decoded(h.groups[g])
-            xr.testing.assert_identical(ours, theirs)
-            assert list(ours.variables) == list(theirs.variables) and dict(ours.sizes) == dict(theirs.sizes)
-            _same_mapping(ours.attrs, theirs.attrs, g)
-            for v in theirs.variables:
-                assert ours[v].dims == theirs[v].dims and ours[v].dtype == theirs[v].dtype, (g, v)
-                _same_mapping(ours[v].attrs, theirs[v].attrs, (g, v))
-                _same_mapping(ours[v].encoding, theirs[v].encoding, (g, v))
-    return groups
+def _xarray_reads(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # xarray's note on phony dimensions
+        with xr.open_datatree(path, engine="h5netcdf") as tree:
+            return tree.load()
+
+
+def _assert_loads_as_xarray_reads(path):
+    """load_fit's complete tree is xarray's: groups in the file's order, every variable's
+    dimensions, dtype and values, and the attributes of the root, each group and each variable
+    with their Python types (text variables as text: skinfit's as str objects, as a fit in
+    memory holds them, where xarray may give fixed-width '<U' arrays)."""
+    ours, theirs = skinfit.load_fit(path).idata, _xarray_reads(path)
+    xr.testing.assert_identical(ours, theirs)
+    assert list(ours.children) == list(theirs.children)
+    _same_mapping(ours.attrs, theirs.attrs, "/")
+    for g in theirs.children:
+        a, b = ours[g].to_dataset(inherit=False), theirs[g].to_dataset(inherit=False)
+        assert list(a.variables) == list(b.variables) and dict(a.sizes) == dict(b.sizes), g
+        _same_mapping(a.attrs, b.attrs, g)
+        for v in b.variables:
+            text = a[v].dtype.kind in "OU" and b[v].dtype.kind in "OU"
+            assert a[v].dims == b[v].dims and (text or a[v].dtype == b[v].dtype), (g, v)
+            _same_mapping(a[v].attrs, b[v].attrs, (g, v))
+    return ours
 
 
 @pytest.fixture(scope="module")
@@ -58,20 +66,20 @@ def subject_file(tmp_path_factory):
     return fit.save(tmp_path_factory.mktemp("subject") / "fit.nc")
 
 
-def test_a_saved_fit_reads_as_h5netcdf_reads_it(ea_fit, subject_file, tmp_path):
-    groups = _assert_read_as_h5netcdf_reads(ea_fit.save(tmp_path / "ea.nc"))
-    assert groups["posterior"]["alpha"].dims == ("chain", "draw")
-    groups = _assert_read_as_h5netcdf_reads(subject_file)
-    assert groups["constant_data"]["subject"].dtype == object and set(groups["constant_data"]["subject"].values) == {"S02"}
-    assert groups["posterior_predictive"]["contact_area"].dims == ("chain", "draw", "obs_id")
-    xr.testing.assert_identical(skinfit.load_fit(subject_file).idata, xr.open_datatree(subject_file).load())
+def test_a_saved_fit_loads_as_xarray_reads_it(ea_fit, subject_file, tmp_path):
+    tree = _assert_loads_as_xarray_reads(ea_fit.save(tmp_path / "ea.nc"))
+    assert tree["posterior"]["alpha"].dims == ("chain", "draw")
+    tree = _assert_loads_as_xarray_reads(subject_file)
+    assert tree["constant_data"]["subject"].dtype == object and set(tree["constant_data"]["subject"].values) == {"S02"}
+    assert tree["posterior_predictive"]["contact_area"].dims == ("chain", "draw", "obs_id")
+    assert "derived" in tree.children
     # as h5netcdf < 1.5 and netCDF-C write them: no dimension ids on one-dimensional datasets
     older = _edited(subject_file, tmp_path / "older.nc", lambda f: f.visititems(
         lambda _, d: d.attrs.__delitem__("_Netcdf4Coordinates")
         if isinstance(d, h5py.Dataset) and d.ndim == 1 and "_Netcdf4Coordinates" in d.attrs else None))
     with h5py.File(older) as f:
         assert "_Netcdf4Coordinates" not in f["constant_data"]["normal_force"].attrs
-    _assert_read_as_h5netcdf_reads(older)
+    _assert_loads_as_xarray_reads(older)  # the same content: the same checksums
 
 
 def _edited(src, dst, edit):
@@ -87,10 +95,7 @@ def _restamped(path):
     (skinfit.io.integrity) those of what xarray reads from it, so that skinfit reads it rather
     than refusing it as damaged; unchanged when xarray cannot read it."""
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            tree = xr.open_datatree(path, engine="h5netcdf").load()
-            tree.close()  # the values read: the file free for h5py to write
+        tree = _xarray_reads(path)
     except (OSError, ValueError, KeyError):
         return path
     integrity.stamp(tree)
@@ -99,28 +104,25 @@ def _restamped(path):
     return path
 
 
-@pytest.mark.parametrize("edit, why", [
-    (lambda f: f["constant_data"]["normal_force"].attrs.__delitem__("DIMENSION_LIST"), "not every axis"),
-    (lambda f: f["posterior"]["draw"].attrs.__setitem__("_Netcdf4Dimid", np.int32(0)), "dimension scale"),
-    (lambda f: f["prior"].create_group("nested"), "not a dataset"),
-    (lambda f: f.create_dataset("at_root", data=np.arange(3.0)), "not only groups"),
-])
-def test_another_layout_is_read_by_h5netcdf(subject_file, tmp_path, edit, why):
-    """Files the direct reader does not know (an axis without a dimension scale, two dimension
-    scales with one id, nested groups, a variable at the root) are refused by it and read by
-    h5netcdf: the fit is the same tree xarray reads, or refused as before."""
-    path = _edited(subject_file, tmp_path / "edited.nc", edit)
-    with pytest.raises(NotPlain, match=why):
-        read_groups(path, lambda g: True)
-    _restamped(path)
+@pytest.mark.parametrize("edit", [
+    lambda f: f["constant_data"]["normal_force"].attrs.__delitem__("DIMENSION_LIST"),  # an axis without a scale
+    lambda f: f["posterior"]["draw"].attrs.__setitem__("_Netcdf4Dimid", np.int32(0)),  # two scales, one id
+    lambda f: f["prior"].create_group("nested"),  # a group inside a group
+    lambda f: f.create_dataset("at_root", data=np.arange(3.0)),  # a variable at the root
+], ids=["no dimension scale", "dimension ids", "nested group", "root variable"])
+def test_a_file_of_another_layout_is_read_as_xarray_reads_it_or_refused(subject_file, tmp_path, edit):
+    """Files Fit.save does not write: the fit is the tree xarray reads, or refused in one line
+    naming the file."""
+    path = _restamped(_edited(subject_file, tmp_path / "edited.nc", edit))
     try:
         fit = skinfit.load_fit(path)
-    except skinfit.InputError as exc:  # h5netcdf refuses it too: one line naming the file
-        assert str(exc).startswith(f"{path}: not a readable skinfit result") and "\n" not in str(exc)
+        fit.complete()
+    except skinfit.InputError as exc:
+        assert str(exc).startswith(f"{path}: ") and "\n" not in str(exc)
         return
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # xarray's note on phony dimensions
-        xr.testing.assert_identical(fit.idata, xr.open_datatree(path).load())
+        xr.testing.assert_identical(fit.idata, _xarray_reads(path))
 
 
 def _odd_attributes(f):
@@ -137,40 +139,31 @@ def _odd_attributes(f):
         a["one_element"] = np.array([2.5])
         a["ints"] = np.array([1, 2, 3], dtype="i2")
         a["matrix"] = np.arange(6.0).reshape(2, 3)
-        a.create("array_type", data=np.arange(6.0).reshape(2, 3), dtype=np.dtype(("f4", (3,))))
         a["nan"] = np.nan
-        a[b"not utf-8 \xff"] = 1.0  # h5py names it by its bytes
 
 
-def test_attributes_are_read_as_h5py_and_h5netcdf_read_them(subject_file, tmp_path):
-    """Each attribute read once by the direct reader has the value, type and HDF5 type h5py's
-    ``attrs[name]`` and ``attrs.get_id(name)`` give (references compared by what they name),
-    for every kind of attribute; the groups are then what h5netcdf reads."""
-    from skinfit.results._netcdf import _attributes
+def test_attributes_of_every_kind_load_as_xarray_reads_them(subject_file, tmp_path):
+    """Text (fixed and variable length, empty, arrays of it), numbers, one-element and
+    multi-dimensional arrays and NaN on the root, a group and a variable: load_fit gives each
+    with the value and Python type xarray gives, so the file's checksums (of what xarray reads)
+    verify."""
+    path = _restamped(_edited(subject_file, tmp_path / "odd.nc", _odd_attributes))
+    tree = _assert_loads_as_xarray_reads(path)
+    assert tree.attrs["fixed_text"] == "newtons" and tree.attrs["vlen_texts"] == ["Zoë", "Zoé"]
+    assert tree["constant_data"]["normal_force"].attrs["fixed_text"] == "newtons"
 
-    path = _edited(subject_file, tmp_path / "odd.nc", _odd_attributes)
-    with h5py.File(path) as f:
-        objects = [f["/"]]
-        f.visititems(lambda _, o: objects.append(o))
-        kinds = set()
-        for obj in objects:
-            ours = _attributes(obj)
-            theirs = [k for k in obj.attrs if k not in ("REFERENCE_LIST", "_NCProperties", "_nc3_strict")]
-            assert list(ours) == theirs, obj.name
-            for k, (value, dtype) in ours.items():
-                expected = obj.attrs[k]
-                assert dtype == obj.attrs.get_id(k).dtype and type(value) is type(expected), (obj.name, k)
-                kinds.add(k)
-                if k == "DIMENSION_LIST":  # references: the same objects named
-                    def named(refs):
-                        return [[f[r].name for r in axis] for axis in refs]
 
-                    assert named(value) == named(expected)
-                elif isinstance(expected, h5py.Empty):
-                    assert value == expected
-                else:
-                    nan = np.asarray(expected).dtype.kind == "f"
-                    assert np.array_equal(value, expected, equal_nan=nan), (obj.name, k)
-    assert {"empty_text", "empty_float", "vlen_texts", "array_type", "DIMENSION_LIST", "CLASS",
-            b"not utf-8 \xff"} <= kinds
-    _assert_read_as_h5netcdf_reads(path)
+def test_a_pointwise_group_of_a_loaded_fit_is_read_from_its_file_only_when_used(subject_file, tmp_path):
+    """The pointwise groups stay in the file until used; zeroed there (a file without its
+    trailer, so that the damage is found by the group's checksum), they are refused when read,
+    naming the group, while the rest of the fit reads."""
+    path = _edited(subject_file, tmp_path / "late.nc", lambda f: None)
+    with h5py.File(path, "r") as f:
+        offset = f["log_likelihood"]["contact_area"].id.get_offset()
+    data = bytearray(path.read_bytes())
+    data[offset + 1000:offset + 5096] = bytes(4096)
+    path.write_bytes(bytes(data))
+    fit = skinfit.load_fit(path)
+    assert "log_likelihood" not in fit.partial_tree.children and fit.group("posterior").sizes["draw"] > 0
+    with pytest.raises(skinfit.InputError, match=f"{path}: damaged: the content of group log_likelihood differs"):
+        fit.complete()

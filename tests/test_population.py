@@ -448,7 +448,7 @@ def test_gibbs_hyper_posterior_is_the_same_in_product_shift_and_shear_coordinate
     import arviz as az
 
     from skinfit.io.data import load_dataset
-    from skinfit.results.fit import _slot_values
+    from skinfit.results.summary import slot_values
     from skinfit.analysis.groups import group_labels
     from skinfit.io.models import load_model
     from skinfit.io.paths import shipped_root
@@ -474,7 +474,7 @@ def test_gibbs_hyper_posterior_is_the_same_in_product_shift_and_shear_coordinate
         post = Posterior(model, priors, ds.subset(labels == f"subject={s}", f"subject={s}"))
         assert {sl.transform for sl in post.slots} == {"log"}
         slots = {x["name"]: x for x in f.attr("slots")}
-        plain[s] = DrawsFit(post, np.column_stack([_slot_values(f.group("posterior"), slots[n]) for n in post.names]),
+        plain[s] = DrawsFit(post, np.column_stack([slot_values(f.group("posterior"), slots[n]) for n in post.names]),
                             s)
     out = []
     for given in (fits, plain):

@@ -25,7 +25,8 @@ import pandas as pd
 
 from skinfit.io.arguments import shown
 from skinfit.errors import InputError, InputTypeError
-from skinfit.results.fit import Fit, _slot_values, as_fit, as_generator
+from skinfit.results.fit import Fit, as_fit
+from skinfit.results.summary import slot_values
 from skinfit.analysis.groups import load_groups
 from skinfit.analysis.population.inputs import subject_digest
 from skinfit.analysis.population.checks import check_prob, check_subjects
@@ -39,7 +40,7 @@ def draws(fit, name):
     if name not in slots:
         raise InputError(f"fit of {fit.model_id} on {fit.dataset_id}", f"no sampled parameter {name!r} "
                          f"(sampled: {', '.join(slots)})", field="parameter")
-    return _slot_values(fit.group("posterior"), slots[name])
+    return slot_values(fit.group("posterior"), slots[name])
 
 
 def hdi(x, prob):

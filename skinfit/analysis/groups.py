@@ -36,8 +36,10 @@ from skinfit.io.arguments import check_input_file, check_path, size_text
 from skinfit.io.data import Dataset, load_dataset
 from skinfit.io.paths import shipped_root
 from skinfit.io.provenance import input_lines, input_record
-from skinfit.posterior import _level_labels
-from skinfit.results.fit import Fit, fit, load_fit, resolve_inputs
+from skinfit.io.labels import level_labels
+from skinfit.inference.run import resolve_inputs
+from skinfit.results.fit import Fit, load_fit
+from skinfit.results.fitting import fit
 
 __all__ = ["fit_by", "group_labels", "derive_seed", "load_groups", "group_dir", "inside", "check_out_dir",
            "read_index", "index_document", "read_inputs",
@@ -72,7 +74,7 @@ def group_labels(dataset, by, where="--by"):
         if c not in frame.columns:
             raise InputError(where, f"no column {c!r} in {dataset.path} (columns: "
                              f"{', '.join(frame.columns)}; declared groups: {', '.join(dataset.groups) or 'none'})")
-    parts = [[f"{c}={v}" for v in _level_labels(frame, [c], dataset)] for c in by]
+    parts = [[f"{c}={v}" for v in level_labels(frame, [c], dataset)] for c in by]
     labels = [",".join(t) for t in zip(*parts)]
     return labels, list(dict.fromkeys(labels))
 

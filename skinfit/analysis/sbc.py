@@ -35,7 +35,9 @@ from scipy import stats
 from skinfit.io.arguments import check_count, check_memory, check_number, shown
 from skinfit.io.data import Dataset, list_datasets, load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, InputTypeError
-from skinfit.results.fit import _slot_values, check_sizes, default_walkers, fit
+from skinfit.inference.run import check_sizes, default_walkers
+from skinfit.results.fitting import fit
+from skinfit.results.summary import slot_values
 from skinfit.io.models import Model, load_model
 from skinfit.io.outputs import check_outputs
 from skinfit.posterior import Posterior
@@ -92,22 +94,11 @@ def _rows(ds, n_rows):
     return ds.subset(keep, f"{n_rows} rows")
 
 
-def _draw_truth(post, rng, batch=64, max_batches=200):
-    """One prior draw inside the physical support (natural parameters, (d,))."""
-    for _ in range(max_batches):
-        theta = post.sample_prior(batch, rng)
-        _, _, valid = post.pointwise(theta)
-        if valid.any():
-            return theta[int(np.argmax(valid))]
-    raise RuntimeError(f"{post.model.id}: no prior draw inside the physical support in "
-                       f"{batch * max_batches} tries ({post.model.support})")
-
-
 def _slot_draws(fit, names):
     """Posterior draws (n, d) in the order of the sampled slots ``names``."""
     ds = fit.group("posterior")
     slots = {s["name"]: s for s in fit.attr("slots")}
-    return np.column_stack([_slot_values(ds, slots[n]) for n in names])
+    return np.column_stack([slot_values(ds, slots[n]) for n in names])
 
 
 def run_sbc(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_draws=99, seed=0,
@@ -212,14 +203,14 @@ class _Job:
         i, ss = item
         rng = np.random.default_rng(ss)
         fit_seed = int(rng.integers(2**63 - 1))
-        theta = _draw_truth(self.post, rng)
+        theta = self.post.prior_draw_in_support(rng)
         y = {o: v[0] for o, v in self.post.simulate(theta[None], rng).items()}
         ds = self.design.with_observations(y, f"sbc seed {self.seed} sim {i}")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
             result = fit(self.post.model, ds, priors=self.fit_priors, rng=fit_seed, split=self.split,
                          ess_target=self.ess_target, max_steps=self.max_steps, n_global=self.n_global,
-                         n_prior_draws=10)
+                         n_prior_draws=10, complete=False)
         draws = _slot_draws(result, list(self.post.names))
         pick = rng.choice(len(draws), size=self.n_draws, replace=len(draws) < self.n_draws)
         s = result.attr("sampler")

@@ -73,7 +73,7 @@ except ImportError:
 from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from skinfit.io.data import load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, error_line, require_optional
-from skinfit.results.fit import fit
+from skinfit.results.fitting import fit
 from skinfit.analysis.groups import (derive_seed, group_dir, group_labels, index_document, inside, record_source,
                                      source_problem, write_json)
 from skinfit.io.campaign_file import read_campaign_file

@@ -30,7 +30,8 @@ from skinfit.io.paths import explicit_search_path, set_search_path
 from skinfit.io.priors import load_priors
 from skinfit.report.groups import group_analyses
 from skinfit.report.html import claim_report_folder, write_report
-from skinfit.results.fit import fit, load_fit
+from skinfit.results.fit import load_fit
+from skinfit.results.fitting import fit
 
 __all__ = ["DEMO_OPTIONS", "demo_plan", "run_demo"]
 

@@ -37,6 +37,7 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 import h5py
@@ -44,8 +45,13 @@ import numpy as np
 
 from skinfit.errors import InputError
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: CheckpointLock is a no-op
+    fcntl = None
+
 __all__ = ["FORMAT", "run_identity", "Checkpoint", "Saved", "load_checkpoint", "CheckpointLock",
-           "map_record", "map_from_record", "temp_file", "remove_stale_temps", "replace_atomic"]
+           "temp_file", "remove_stale_temps", "replace_atomic"]
 
 #: Version of the checkpoint layout and of the sampler that wrote it; a checkpoint of another
 #: version is refused (2: adaptive independence proposal, whose chain a format-1 run cannot continue).
@@ -110,22 +116,6 @@ def _differences(saved, now):
             out.append(f"setting {key} differs: checkpoint {saved['settings'].get(key)!r}, "
                        f"now {now['settings'].get(key)!r}")
     return out
-
-
-def map_record(result):
-    """A :class:`~skinfit.inference.optimize.MAPResult` as JSON-able data (stored in the checkpoint)."""
-    return {"theta": [float(v) for v in result.theta], "log_density": float(result.log_density),
-            "starts": json.loads(json.dumps(list(result.starts), default=float)),
-            "evaluations": int(result.evaluations), "seconds": float(result.seconds)}
-
-
-def map_from_record(record):
-    """The :class:`~skinfit.inference.optimize.MAPResult` stored by :func:`map_record` (theta bit for bit)."""
-    from skinfit.inference.optimize import MAPResult
-
-    return MAPResult(theta=np.array(record["theta"], dtype=float), log_density=record["log_density"],
-                     starts=tuple(record["starts"]), evaluations=record["evaluations"],
-                     seconds=record["seconds"])
 
 
 # ---- JSON for numpy Generator states (PCG64 holds 128-bit ints; MT19937 holds arrays) ----------
@@ -229,7 +219,7 @@ class Checkpoint:
         the importance rounds that made it."""
         self.p0 = np.array(p0, dtype=float)
         self.generator_state = generator_state
-        self.map_record = map_record(map_result)
+        self.map_record = map_result.as_record()
         self.proposal = proposal.to_dict()
         self.importance = list(importance)
 
@@ -244,7 +234,7 @@ class Checkpoint:
 
         def build(f):
             g = f.create_group("chain")
-            g.attrs["version"] = _emcee_version()
+            g.attrs["version"] = metadata.version("emcee")  # as emcee's HDFBackend records it
             g.attrs["nwalkers"] = nwalkers
             g.attrs["ndim"] = ndim
             g.attrs["has_blobs"] = False
@@ -272,12 +262,6 @@ class Checkpoint:
         self.write_seconds += self._last_duration
         self.writes += 1
         self.last_write = time.monotonic()
-
-
-def _emcee_version():
-    import emcee
-
-    return emcee.__version__
 
 
 def user_file_mode():
@@ -410,9 +394,7 @@ class CheckpointLock:
         self._fd = None
 
     def __enter__(self):
-        try:
-            import fcntl
-        except ImportError:  # pragma: no cover - not POSIX
+        if fcntl is None:  # pragma: no cover - not POSIX
             return self
         if not self.shared:
             self.lock_path.parent.mkdir(parents=True, exist_ok=True)
@@ -474,8 +456,6 @@ class CheckpointLock:
         if self._fd is None:
             return False
         if self.shared:  # the last reader removes the file it may have created
-            import fcntl
-
             try:
                 fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                 if os.stat(self.lock_path).st_ino == os.fstat(self._fd).st_ino:

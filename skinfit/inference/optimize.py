@@ -6,6 +6,7 @@ sampling coordinate between prior quantiles 1e-9 and 1 - 1e-9.  The objective is
 log-density (no Jacobian), so the optimum is the MAP of the parameters as the user sees them.
 """
 
+import json
 import time
 from dataclasses import dataclass, field
 
@@ -33,6 +34,18 @@ class MAPResult:
 
     def as_dict(self, names):
         return {n: float(v) for n, v in zip(names, self.theta)}
+
+    def as_record(self):
+        """The result as JSON-able data (stored in a checkpoint, :mod:`skinfit.inference.checkpoint`)."""
+        return {"theta": [float(v) for v in self.theta], "log_density": float(self.log_density),
+                "starts": json.loads(json.dumps(list(self.starts), default=float)),
+                "evaluations": int(self.evaluations), "seconds": float(self.seconds)}
+
+    @classmethod
+    def from_record(cls, record):
+        """The result stored by :meth:`as_record` (theta bit for bit)."""
+        return cls(theta=np.array(record["theta"], dtype=float), log_density=record["log_density"],
+                   starts=tuple(record["starts"]), evaluations=record["evaluations"], seconds=record["seconds"])
 
 
 class MAPError(Portable, RuntimeError):

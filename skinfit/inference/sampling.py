@@ -30,12 +30,17 @@ Convergence (see NOTES: walkers are not independent chains): after discarding a 
 rank-normalised R-hat over walkers, on exactly the draws returned, must be <= ``rhat_max``.
 """
 
-import functools
 import time
 import warnings
 from dataclasses import dataclass
 
+import emcee
 import numpy as np
+from arviz_stats import rhat as az_rhat
+from tqdm.auto import tqdm
+
+from skinfit.inference.moves import DEMove, IndependenceMove, default_moves
+from skinfit.inference.proposal import MixtureT, fit_mixture, select_mixture
 
 __all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "independence_move", "adaptive_moves",
            "describe_moves", "importance_start", "sampler_settings"]
@@ -90,37 +95,6 @@ class SamplerRun:
     adaptation: tuple = ()  # refits of the independence proposal: dicts step, components
 
 
-@functools.cache
-def _sampler_class():
-    """emcee's EnsembleSampler less its per-step RandomState copy (:class:`_Sampler`), made on
-    first use: emcee (and scipy.stats, which it imports) is imported only by a process that
-    samples, not by one that reads this module's settings (:func:`sampler_settings`: a demo or
-    campaign deciding whether saved fits can be reused)."""
-    import emcee
-
-    class _Sampler(emcee.EnsembleSampler):
-        """emcee's sampler without a copy of its RandomState on every step.
-
-        emcee 3.1.6 stores ``self.random_state`` (``RandomState.get_state()``, a tuple holding a
-        copy of the 624-word Mersenne Twister state) into the State and the backend after every
-        step: 30 us of a 0.15-0.2 ms step of emcee's own work (profiled, 5000 steps).  Here the
-        per-step getter returns None (setting a state still works); the draws are emcee's own, in
-        emcee's order.  For runs without a checkpoint, which needs the state after every completed
-        step.
-        """
-
-        @property
-        def random_state(self):
-            return None
-
-        @random_state.setter
-        def random_state(self, state):
-            if state is not None:  # None (a State this class yielded): the generator goes on
-                emcee.EnsembleSampler.random_state.fset(self, state)
-
-    return _Sampler
-
-
 def initial_ball(post, z0, cov, nwalkers, rng, max_tries=20):
     """Walkers drawn from N(z0, cov); draws outside the support are redrawn, after five tries
     from shrinking balls around walkers placed so far (a MAP on a prior bound, where half of
@@ -169,10 +143,6 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     which R-hat is gated (ArviZ's R-hat includes a folded variant that is not invariant under
     the log and joint transforms of the sampling coordinates).
     """
-    import emcee
-
-    from skinfit.inference.moves import default_moves
-
     t0 = time.perf_counter()
     nwalkers, d = p0.shape
     seed = int(rng.integers(2**32 - 1))
@@ -211,8 +181,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     def tally():  # the evaluation counters, for the checkpoint
         return {**getattr(post, "counts", {}), SAMPLER_EVALUATIONS: evaluated}
 
-    sampler_class = _sampler_class() if checkpoint is None else emcee.EnsembleSampler
-    sampler = sampler_class(nwalkers, d, log_prob, vectorize=True, moves=moves, backend=backend)
+    sampler = emcee.EnsembleSampler(nwalkers, d, log_prob, vectorize=True, moves=moves, backend=backend)
     n = backend.iteration
     history, start = [], 0  # refits so far; the chain is homogeneous from ``start`` on
     next_adapt = ADAPT_FIRST if indep is not None and ADAPT_FIRST < max_steps else None
@@ -297,16 +266,12 @@ def describe_moves():
 
 def independence_move(proposal):
     """The independence move :func:`run_emcee` samples with, from ``proposal``."""
-    from skinfit.inference.moves import IndependenceMove
-
     return IndependenceMove(proposal, INDEPENDENCE_SUBSTEPS)
 
 
 def adaptive_moves(indep):
     """Independence moves from the fitted proposal, mixed with differential evolution (which
     keeps local mixing where the proposal fits the posterior poorly)."""
-    from skinfit.inference.moves import DEMove
-
     return [(indep, INDEPENDENCE_WEIGHT), (DEMove(), 1.0 - INDEPENDENCE_WEIGHT)]
 
 
@@ -333,8 +298,6 @@ def _adapt(chain, seed, nu, max_samples=2000):
     fitted on the even walkers, scored on the odd ones).  Its random draws (subsamples, EM
     seeds) come from (``seed``, step) alone: a resumed run refits identically.
     """
-    from skinfit.inference.proposal import fit_mixture, select_mixture
-
     step = len(chain)
     d = chain.shape[2]
     window = chain[step // 2:]
@@ -367,8 +330,6 @@ def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rou
     were degenerate, list of rounds: draws, effective sample size, points inside the support,
     whether a refit followed, and ``beta`` for a tempered refit).
     """
-    from skinfit.inference.proposal import MixtureT, fit_mixture, select_mixture
-
     record, best, informative = [], None, 0  # best: (ess, proposal, walkers)
     while True:
         x = proposal.draw(rng, size)
@@ -475,8 +436,6 @@ def _check(chain, ess_target, rhat_max, min_tau_multiple, burn_factor, keep_tota
             draws = natural(draws.reshape(-1, d)).reshape(draws.shape)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            from arviz_stats import rhat as az_rhat
-
             rhat = float(np.max(az_rhat(draws.transpose(1, 0, 2), chain_axis=0, draw_axis=1)))
         if not rhat <= rhat_max:
             reasons.append(f"max R-hat {rhat:.3f} > {rhat_max}")
@@ -514,6 +473,4 @@ def integrated_time(x, c=5):
 def _progress_bar(progress, total):
     if not progress:
         return None
-    from tqdm.auto import tqdm
-
     return tqdm(total=total, desc="emcee", unit="step", leave=False, mininterval=0.5)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from skinfit.errors import InputError, InputTypeError
 
-__all__ = ["check_count", "check_number", "check_flag", "check_seed", "check_path", "check_input_file",
+__all__ = ["check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path", "check_input_file",
            "check_output_file", "check_output_folder", "check_memory", "check_mapping", "available_memory",
            "size_text"]
 
@@ -86,6 +86,16 @@ def check_seed(rng, where, name="rng", *, recorded=False):
         raise InputError(where, f"expected a seed{' 0 .. 2**63-1' if recorded else ', a whole number >= 0'} "
                                 f"(got {int(rng)})", field=name)
     return rng
+
+
+def as_generator(rng, where="rng"):
+    """SPEC 7: an int seed >= 0, None or a numpy Generator -> a numpy Generator (InputTypeError,
+    a TypeError, for anything else: a float, a bool, a string)."""
+    import numpy as np  # here, not with the module: see _numpy_bool (``skinfit --help`` does without numpy)
+
+    if isinstance(rng, np.random.Generator):
+        return rng
+    return np.random.default_rng(check_seed(rng, where, None))
 
 
 def check_path(value, where, name, what):

@@ -11,18 +11,14 @@ read, up to ``$SKINFIT_MAX_DATA_MB``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    from collections.abc import Mapping
-    from skinfit.io.models import Model
-
 import csv
 import hashlib
 import io
 import json
 import os
 import re
+import shutil
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -33,7 +29,8 @@ import pandas as pd
 from skinfit.io.toml import available, find_file, read_regular, read_toml, require
 from skinfit.io.arguments import check_path
 from skinfit.errors import InputError
-from skinfit.io.models import _display, check_id
+from skinfit.io.models import Model, check_id, load_model
+from skinfit.io.paths import display
 from skinfit.io.units import NONNEGATIVE, parse_unit
 
 __all__ = ["Dataset", "load_dataset", "list_datasets", "from_frame", "as_dataset", "check_units", "write_card",
@@ -208,7 +205,7 @@ def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
         return _load_csv(p, model=model, units=units, max_bytes=max_bytes)
     card = find_file("datasets", name)
     doc, text = read_toml(card)
-    where = _display(card)
+    where = display(card)
     columns = _columns(doc, where)
     data_path = _data_file(card, require(doc, "file", str, where), where)
     groups = tuple(require(doc, "groups", list, where, default=[]))
@@ -226,12 +223,12 @@ def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
             if key not in provenance:
                 raise InputError(where, "simulated data must record its generating parameters and seed",
                                  field=f"provenance.{key}")
-    raw = read_regular(data_path, max_bytes, "data file", where=_display(data_path))
+    raw = read_regular(data_path, max_bytes, "data file", where=display(data_path))
     recorded = provenance.get("sha256")
     if recorded is not None and recorded != hashlib.sha256(raw).hexdigest():
         raise InputError(where, f"{data_path.name} is not the file this card was written for (its sha256 "
                          f"differs from the one recorded)", field="provenance.sha256")
-    frame = read_table(raw, columns, _display(data_path))
+    frame = read_table(raw, columns, display(data_path))
     digest = hashlib.sha256(text.encode() + b"\0" + raw).hexdigest()
     ds = Dataset(id=check_id(require(doc, "id", str, where, default=card.parent.name), where),
                  title=require(doc, "title", str, where, default=""), frame=frame,
@@ -314,15 +311,13 @@ def _example_unit(model, name):
 def _as_model(model):
     if model is None or not isinstance(model, str):
         return model
-    from skinfit.io.models import load_model
-
     return load_model(model)
 
 
 def _load_csv(path, *, model=None, units=None, max_bytes=None):
     """A dataset from a CSV file with units in its header and no card."""
     model = _as_model(model)
-    where = _display(path)
+    where = display(path)
     raw = read_regular(path, max_data_bytes() if max_bytes is None else max_bytes, "data file", where=where)
     headers, _ = _split_csv(raw, where)
     columns = _columns_from_header(headers, where, model, units)
@@ -420,8 +415,6 @@ def write_card(dataset, folder, data_name="data.csv"):
     Only for datasets read from a CSV without a card (their provenance names the source file).
     Returns the card's path.
     """
-    import shutil
-
     src = dataset.provenance.get("source_file")
     if not src:
         raise InputError(dataset.path, "only a dataset read from a CSV file can be written as a card")

@@ -1,17 +1,50 @@
-"""Units and long names of every variable of a fit's result tree (CF-style ``units`` and
-``long_name`` attrs): parameters and data in the SI units they are stored in."""
+"""Names, units and labels: the units and long names of every variable of a fit's result tree
+(CF-style ``units`` and ``long_name`` attrs: parameters and data in the SI units they are
+stored in), the suffix of noise parameters, and the labels of the levels of grouping columns."""
 
 import json
 import tomllib
 
-from skinfit.io.units import si_unit
+from skinfit.io.units import si_unit, to_si
 
-__all__ = ["variable_attrs", "annotate", "noise_suffix", "parameter_units", "derived_units"]
+__all__ = ["variable_attrs", "annotate", "noise_suffix", "noise_parameter_names", "level_labels", "parameter_units",
+           "derived_units"]
 
 
 def noise_suffix(observables, obs):
     """The suffix of ``obs``'s noise parameters: none for a single observable, else ``_<obs>``."""
     return "" if len(observables) == 1 else f"_{obs}"
+
+
+def noise_parameter_names(observables, noise):
+    """Names of the noise parameters of ``observables`` with noise models ``noise`` (a mapping
+    observable -> normal | student_t | lognormal): ``sigma`` (+ ``nu`` for Student-t), suffixed
+    when several observables (:func:`noise_suffix`)."""
+    names = []
+    for obs in observables:
+        suffix = noise_suffix(observables, obs)
+        names.append(f"sigma{suffix}")
+        if noise[obs] == "student_t":
+            names.append(f"nu{suffix}")
+    return names
+
+
+def level_labels(frame, cols, dataset):
+    """The label of each row's level of the columns ``cols`` of ``frame`` (a DataFrame of
+    ``dataset``'s, values in SI): the values joined by commas, quantities in the units the data
+    came in (``dataset.column(c).unit``) written with ``:g`` (``75`` for 75 V, ``0.5`` for 0.5 mN):
+    the names of the levels of a split parameter (``alpha[75]``) and of a ``--by`` group."""
+    parts = []
+    for c in cols:
+        values = frame[c]
+        try:
+            unit = dataset.column(c).unit
+        except KeyError:
+            unit = None
+        if unit is not None:
+            values = [f"{v / to_si(unit):g}" for v in values.to_numpy(dtype=float)]
+        parts.append([str(v) for v in values])
+    return [",".join(t) for t in zip(*parts)]
 
 
 def derived_units(fit):

@@ -8,30 +8,34 @@ card are SI (:func:`skinfit.io.units.check_model_unit`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    import os
-    from collections.abc import Mapping
-    import pandas as pd
-    from numpy.typing import ArrayLike
-
 import math
+import os
 import re
+import tomllib
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:  # pandas in annotations only: ``skinfit models`` does without it
+    import pandas as pd
 
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
-from skinfit.errors import InputError, SupportWarning
+from skinfit.errors import InputError, InputTypeError, SupportWarning
+from skinfit.io.arguments import check_mapping, shown
 from skinfit.io.forward_check import forward_error, validated
+from skinfit.io.paths import display
+from skinfit.io.references import check_source
 from skinfit.io.registry import resolve
 from skinfit.io.units import check_model_unit
 
-__all__ = ["Model", "Quantity", "load_model", "list_models", "resolve_forward", "check_id", "NOISE_MODELS"]
+__all__ = ["Model", "Quantity", "load_model", "list_models", "parse_model_text", "resolve_forward", "check_id",
+           "check_constant", "resolve_noise", "resolve_constants", "resolve_split", "NOISE_MODELS"]
 
 NOISE_MODELS = ("normal", "student_t", "lognormal")
 
@@ -246,9 +250,7 @@ def load_model(name: str | os.PathLike) -> Model:
 
 def _parse_model(path, digest):
     _, text = read_toml(path)
-    model = replace(_parse_model_text(text, _display(path), digest), file=str(Path(path).resolve()))
-    from skinfit.io.references import check_source
-
+    model = replace(parse_model_text(text, display(path), digest), file=str(Path(path).resolve()))
     check_source(model.source, model.path, "source")  # keys into references.toml
     for cname, source in model.constant_sources.items():
         if source:
@@ -264,9 +266,70 @@ def check_constant(name, value, where):
     return float(value)
 
 
-def _parse_model_text(text, where, digest):
-    import tomllib
+def resolve_noise(model, observables, noise, where):
+    """The noise model of each of ``observables`` (those of ``model`` in the data): ``noise`` as a
+    fit takes it (None: the card's; a name for all; a mapping observable -> name, the card's for
+    the others), checked against :data:`NOISE_MODELS` (InputError naming ``where``)."""
+    card_noise = {o.name: o.noise for o in model.observables}
+    if noise is None or isinstance(noise, str):
+        noise = {o: noise or card_noise[o] for o in observables}
+    else:
+        check_mapping(noise, where, "noise", "a noise model name or a mapping observable -> noise model")
+        unknown = set(noise) - set(observables)
+        if unknown:
+            raise InputError(where, f"no observable {sorted(map(str, unknown))} in the data (observables: "
+                             f"{', '.join(observables)})", field="noise")
+        noise = {o: noise.get(o, card_noise[o]) for o in observables}
+    for o, kind in noise.items():
+        if kind not in NOISE_MODELS:
+            raise InputError(where, f"unknown noise model {kind!r} for {o} (expected one of "
+                             f"{', '.join(NOISE_MODELS)})", field="noise")
+    return noise
 
+
+def resolve_constants(model, constants, where):
+    """The card's constants with ``constants`` (a mapping name -> number, optional) overriding
+    them, each checked (:func:`check_constant`); InputError naming ``where`` for a name the card
+    does not have."""
+    check_mapping(constants, where, "constants", "a mapping constant name -> number")
+    resolved = {**model.constants, **{k: check_constant(k, v, where) if k in model.constants else v
+                                      for k, v in (constants or {}).items()}}
+    unknown = set(constants or {}) - set(model.constants)
+    if unknown:
+        raise InputError(where, f"unknown constants {sorted(unknown)} (model constants: "
+                         f"{', '.join(model.constants)})", field="constants")
+    return resolved
+
+
+def resolve_split(model, split, dataset, where):
+    """Parameter -> tuple of grouping columns of ``dataset`` it is fitted once per level of:
+    ``split`` (a mapping parameter -> column or list of columns; None: the card's ``[split]``),
+    checked against the model's parameters and the data's columns (InputError naming ``where``)."""
+    split = dict(model.split if split is None else
+                 check_mapping(split, where, "split", "a mapping parameter -> column or list of columns"))
+    out = {}
+    for pname, cols in split.items():
+        if not (isinstance(cols, str) or isinstance(cols, (list, tuple))
+                and cols and all(isinstance(c, str) for c in cols)):
+            raise InputTypeError(where, f"expected {pname} = a column name or a list of column names "
+                                 f"(got {shown(cols)})", field="split")
+        if pname not in model.parameter_names:
+            raise InputError(where, f"cannot split unknown parameter {pname!r} (parameters: "
+                             f"{', '.join(model.parameter_names)})", field="split")
+        cols = (cols,) if isinstance(cols, str) else tuple(cols)
+        for c in cols:
+            if c not in dataset.frame.columns:
+                raise InputError(where, f"cannot split {pname!r} by {c!r}: no such column in "
+                                 f"{dataset.path}", field="split")
+        out[pname] = cols
+    return out
+
+
+def parse_model_text(text, where, digest):
+    """The :class:`Model` of a model card's TOML ``text`` (as read from a file, or as saved in a
+    fit's root attributes), validated; ``where`` names it in errors and becomes its ``path``,
+    ``digest`` is the sha256 of its file. Its ``source`` keys are not resolved here
+    (:func:`load_model` checks them against the references files)."""
     doc = tomllib.loads(text)
     constants, sources = {}, {}
     for cname, spec in require(doc, "constants", dict, where, default={}).items():
@@ -365,12 +428,6 @@ def _derived_table(doc, where):
     over = require(table, "over", list, where, field_prefix="derived.", default=[])
     return MappingProxyType({"function": ref, "over": tuple(over),
                              "quantities": MappingProxyType(dict(quantities))})
-
-
-def _display(path):
-    from skinfit.io.paths import display
-
-    return display(path)
 
 
 def list_models() -> list[str]:

@@ -20,8 +20,11 @@ from functools import lru_cache
 from importlib import metadata, resources
 from pathlib import Path
 
+import platformdirs
+
 from skinfit.io.arguments import check_path
 from skinfit.errors import InputError
+from skinfit.io import registry
 
 __all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path", "explicit_search_path",
            "check_search_path", "where_from", "shipped_root", "user_root", "user_cache_root"]
@@ -76,15 +79,12 @@ def shipped_root() -> Path | None:
 
 def user_root() -> Path:
     """The per-user folder (e.g. ``~/.local/share/skinfit`` on Linux)."""
-    import platformdirs
-
     return Path(platformdirs.user_data_dir("skinfit", appauthor=False))
 
 
 def user_cache_root() -> Path:
-    """The per-user cache folder (e.g. ``~/.cache/skinfit`` on Linux): the figures' font."""
-    import platformdirs
-
+    """The per-user cache folder (e.g. ``~/.cache/skinfit`` on Linux): the figure store, the
+    figures' font."""
     return Path(platformdirs.user_cache_dir("skinfit", appauthor=False))
 
 
@@ -120,9 +120,7 @@ def search_path() -> list[Root]:
     roots = [_given(Root(p, "--path")) for p in _EXPLICIT]
     roots += [_given(Root(Path(p).expanduser(), f"${ENV}")) for p in os.environ.get(ENV, "").split(os.pathsep) if p]
     roots.append(Root(user_root(), "user"))
-    from skinfit.io.registry import plugin_folders  # card folders of installed plug-ins (skinfit.models entry points)
-
-    roots += [Root(Path(p), "plug-in") for p in plugin_folders()]
+    roots += [Root(Path(p), "plug-in") for p in registry.plugin_folders()]  # card folders of installed plug-ins
     shipped = shipped_root()
     if shipped is not None:
         roots.append(Root(shipped, "shipped"))

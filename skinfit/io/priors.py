@@ -7,12 +7,8 @@ log-density is normalised (evidence from different models is comparable).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:  # names used only in annotations
-    import os
-
 import math
+import os
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -22,16 +18,18 @@ import numpy as np
 
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError
-from skinfit.io.models import _display, check_id
+from skinfit.io.models import check_id
+from skinfit.io.paths import display
 from skinfit.io.references import check_source
 
-__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "DISTRIBUTIONS"]
+__all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "check_physical", "prior_groups",
+           "DISTRIBUTIONS", "LOG_DENSITIES"]
 
 
 def _stats():
     """scipy.stats, imported on first use (~0.5 s): a saved fit's priors are read, and its trace
     and corner plots drawn, from their bounds alone (:func:`parse_prior` with ``check_mass=False``)."""
-    from scipy import stats
+    from scipy import stats  # here, not with the module: see the docstring (tests/test_startup.py)
 
     return stats
 
@@ -46,8 +44,11 @@ DISTRIBUTIONS = {
     "gamma": (("shape", "scale"), lambda a, lo, hi: _stats().gamma(a=a["shape"], scale=a["scale"])),
     "beta": (("a", "b"), lambda a, lo, hi: _stats().beta(a["a"], a["b"])),
 }
-# Closed-form log-densities without their normalising constants (see Prior._log_norm).
-_LOGPDF = {
+#: Distribution name -> its closed-form log-density without the normalising constant, a numpy
+#: function ``(x, args, lower, upper)`` of values ``x`` (any shape) and the prior's arguments
+#: (:attr:`Prior.args`, each a scalar or an array broadcasting with ``x``); the constant is
+#: :attr:`Prior._log_norm`. The sampling hot path evaluates priors with these, one call per family.
+LOG_DENSITIES = {
     "uniform": lambda x, a, lo, hi: np.zeros_like(x),
     "loguniform": lambda x, a, lo, hi: -np.log(x),
     "normal": lambda x, a, lo, hi: -0.5 * ((x - a["loc"]) / a["scale"]) ** 2,
@@ -88,7 +89,7 @@ class Prior:
         if hi - lo < 1e-12:  # both in one tail: use survival functions
             lo, hi = f.logsf(self.upper), f.logsf(self.lower)
         if hi - lo < 1e-12:  # bounds narrow beside the spread: the density is flat there (Simpson)
-            from scipy import special
+            from scipy import special  # with scipy.stats (frozen above), never on a path without it
 
             a, b = self.lower, self.upper
             return float(special.logsumexp(f.logpdf([a, 0.5 * (a + b), b]), b=[1.0, 4.0, 1.0])
@@ -101,7 +102,7 @@ class Prior:
         x = np.asarray(x, dtype=float)
         inside = (x >= self.lower) & (x <= self.upper)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lp = _LOGPDF[self.dist](x, self.args, self.lower, self.upper) - self._log_norm
+            lp = LOG_DENSITIES[self.dist](x, self.args, self.lower, self.upper) - self._log_norm
         return np.where(inside, lp, -np.inf)
 
     @cached_property
@@ -241,13 +242,45 @@ def check_priors_for(priors, model):
                          f"{model.id!r} (copy it and set model = {model.id!r} if it applies)", field="model")
 
 
+def check_physical(model, priors, noise_names):
+    """Refuse a prior whose bounds leave the range the physics allows: the model card's
+    ``physical = [lower, upper]`` of each parameter, and [0, inf] for the noise parameters
+    ``noise_names`` (scales, Student-t degrees of freedom)."""
+    ranges = {q.name: q.physical for q in model.parameters}
+    ranges.update({n: (0.0, math.inf) for n in noise_names})
+    for name, (lo, hi) in ranges.items():
+        prior = priors[name]
+        if prior.lower < lo or prior.upper > hi:
+            raise InputError(priors.path or "priors", f"bounds [{prior.lower:g}, {prior.upper:g}] leave the "
+                             f"physical range [{lo:g}, {hi:g}] of {name} declared by model {model.id!r} "
+                             f"(its card, [[parameters]] physical)", field=f"{name}.bounds")
+
+
+def prior_groups(priors):
+    """The priors of a vector of parameters (a sequence of :class:`Prior`, one per column)
+    grouped by family for one vectorised call each: tuples (log-density of
+    :data:`LOG_DENSITIES`, columns (m,), arguments {name: (m,) array}); uniform priors, constant
+    inside their bounds, need no evaluation."""
+    groups = {}
+    for j, p in enumerate(priors):
+        groups.setdefault(p.dist, []).append(j)
+    out = []
+    for dist, cols in groups.items():
+        if dist == "uniform":
+            continue
+        members = [priors[j] for j in cols]
+        args = {k: np.array([p.args[k] for p in members]) for k in members[0].args}
+        out.append((LOG_DENSITIES[dist], np.array(cols), args))
+    return tuple(out)
+
+
 def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet:
     """Load a prior file by id (``priors/<id>.toml``) or by path. ``check_mass=False``: every
     check but those that need scipy.stats (:func:`parse_prior`), for a caller that needs the
     file's identity (its sha256) and what it declares, not its distributions."""
     path = find_file("priors", name)
     doc, text = read_toml(path)
-    where = _display(path)
+    where = display(path)
     model = check_id(require(doc, "model", str, where), where, field="model")
     if "id" in doc:
         check_id(doc["id"], where)

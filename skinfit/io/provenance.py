@@ -75,10 +75,11 @@ def shadow_messages(record, sha256):
 
 def warn_shadows(record, model, priors):
     """Warn (:class:`ShadowWarning`, one line each) about every file of ``record`` that hides
-    another of other content."""
+    another of other content (pointing at the caller of :func:`skinfit.fit`, which reaches this
+    through :func:`skinfit.inference.run.run`)."""
     sha = {"model": model.sha256, "priors": priors.sha256, "dataset": record["dataset"].get("sha256")}
     for message in shadow_messages(record, sha):
-        warnings.warn(message, ShadowWarning, stacklevel=3)
+        warnings.warn(message, ShadowWarning, stacklevel=4)
 
 
 def inputs_of(attrs):

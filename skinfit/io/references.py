@@ -14,6 +14,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from skinfit.errors import InputError
+from skinfit.io.paths import search_path
 
 __all__ = ["references", "full", "cite_long", "parse_source", "check_source", "cite"]
 
@@ -24,8 +25,6 @@ _FIELDS = {"title", "authors", "venue", "year", "doi", "note", "short"}
 def references():
     """key -> mapping of the work's fields: the shipped references.toml, and any
     ``references.toml`` on the search path (earlier folders win on a shared key)."""
-    from skinfit.io.paths import search_path
-
     files = tuple(str(r.path / "references.toml") for r in search_path() if (r.path / "references.toml").is_file())
     return _load(files)
 

@@ -15,8 +15,10 @@ point's name) or a mapping ``{"forward": {name: f}, "shear": {...}, "shift": {..
 cards that :mod:`skinfit.io.toml` then finds by id.
 """
 
+import importlib
 import inspect
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
 
 from skinfit.errors import InputError
@@ -84,8 +86,6 @@ def _load_plugins():
     global _PLUGINS
     if _PLUGINS is not None:
         return _PLUGINS
-    from importlib.metadata import entry_points
-
     table, folders = {role: {} for role in ROLES}, []
     builtin = _builtin_table()
     for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
@@ -170,8 +170,6 @@ def resolve(role, ref, where, field=None):
                          f"{ENTRY_POINT_GROUP!r} entry point)", field=field)
     func = entry.function
     if func is None:
-        import importlib
-
         module, _, name = entry.ref.partition(":")
         func = getattr(importlib.import_module(module), name)
     _check_signature(role, func, where, field)

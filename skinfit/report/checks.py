@@ -20,7 +20,8 @@ import pandas as pd
 
 from skinfit.inference.guardrails import BOUND_ALPHA, BOUND_SHARE, BOUND_WINDOW, STUCK_ACCEPTANCE
 from skinfit.report.tables import cell_text
-from skinfit.results.fit import as_fit, wall_time_text
+from skinfit.results.fit import as_fit
+from skinfit.results.summary import wall_time_text
 
 __all__ = ["fit_diagnostics", "population_issues", "comparison_issues", "contrast_issues", "design_issues",
            "section_issues", "checked_text", "NOT_CONVERGED_ATTR"]
@@ -106,11 +107,11 @@ def fit_diagnostics(fit, summary=None):
     for n in fit.notes:  # information the guard rails recorded, not failures (--strict ignores them)
         add(f"note: {n.get('check', 'unnamed')}" + (f" ({n['parameter']})" if n.get("parameter") else ""),
             n.get("message", ""), "information, not a failure", "info")
-    if "misfit" in fit.attrs:  # skinfit.analysis.misfit; its warnings are issues through the rows above
+    if "misfit" in fit.attrs:  # skinfit.inference.misfit; its warnings are issues through the rows above
         r = fit.attr("misfit")
         bad = any(c["warn"] for c in r["checks"]) or bool(r.get("pareto_k") and r["pareto_k"]["warn"])
         rows.append(("fit to the data: smallest posterior-predictive p", min(c["p"] for c in r["checks"]),
-                     f">= {r['alpha']:g} / {r['m']} checks (skinfit.analysis.misfit), {r['draws']} draws",
+                     f">= {r['alpha']:g} / {r['m']} checks (skinfit.inference.misfit), {r['draws']} draws",
                      "WARN" if bad else "ok"))
     starts = fit.attr("optimizer").get("starts", [])
     add("MAP log density", float(fit.attrs.get("map_log_density", float("nan"))),

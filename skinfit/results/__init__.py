@@ -1,2 +1,4 @@
-"""The one results container: :class:`~skinfit.results.fit.Fit` (an ArviZ DataTree
-with provenance attributes), its summary, saving and loading."""
+"""The one results container: :class:`~skinfit.results.fit.Fit` (an ArviZ DataTree with
+provenance attributes) made by :func:`~skinfit.results.fitting.fit`, its tree
+(:mod:`~skinfit.results.tree`), summary (:mod:`~skinfit.results.summary`), saving and loading
+(:mod:`~skinfit.results.store`)."""

@@ -16,7 +16,8 @@ from skinfit.errors import InputError, InputTypeError
 from skinfit.io.labels import noise_suffix
 from skinfit.io.models import Model, load_model
 from skinfit.io.priors import load_priors
-from skinfit.results.fit import Fit, as_generator
+from skinfit.io.arguments import as_generator
+from skinfit.results.fit import Fit
 from skinfit.analysis.design.problem import n_candidates, restrict_to_support, take_x
 from skinfit.analysis.design.nested import eig_nmc
 from skinfit.analysis.design.laplace import batch_eig, fisher_factors, greedy_plan, laplace_design, laplace_gains

@@ -17,7 +17,8 @@ import numpy as np
 
 from skinfit.errors import InputError
 from skinfit.io.arguments import check_count, check_flag, check_seed
-from skinfit.results.fit import Fit, as_fit, as_generator
+from skinfit.io.arguments import as_generator
+from skinfit.results.fit import Fit, as_fit
 from skinfit.analysis.evidence.log_evidence import LogEvidence
 from skinfit.analysis.evidence.bridge import bridge_sampling
 from skinfit.analysis.evidence.laplace import LaplaceError, laplace

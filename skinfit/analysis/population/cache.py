@@ -14,7 +14,7 @@ import numpy as np
 from skinfit.inference.checkpoint import replace_atomic
 from skinfit.io.paths import code_hash
 from skinfit.io.shipped import shipped_physics
-from skinfit.results.fit import _plain_json
+from skinfit.results.fit import plain_json
 from skinfit.analysis.population.result import PopulationResult
 
 __all__ = ["cacheable", "cache_key", "write_cache", "read_cache"]
@@ -45,7 +45,7 @@ def write_cache(path, key, result):
               **({"corr": result.corr} if result.corr is not None else {}),
               **{f"separate_{i}": result.separate[s] for i, s in enumerate(result.subjects)}}
     buf = io.BytesIO()
-    np.savez(buf, meta=np.array(json.dumps(meta, default=_plain_json)), **arrays)
+    np.savez(buf, meta=np.array(json.dumps(meta, default=plain_json)), **arrays)
     replace_atomic(path, buf.getvalue())
 
 

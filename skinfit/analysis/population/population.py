@@ -45,7 +45,9 @@ import pandas as pd
 from skinfit.analysis.population.checks import FAMILIES, check_arguments, check_size, check_subjects, not_converged
 from skinfit.analysis.population.hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
 from skinfit.errors import InputError
-from skinfit.results.fit import Fit, _priors_from_attrs, _slot_values, as_generator
+from skinfit.io.arguments import as_generator
+from skinfit.results.fit import Fit
+from skinfit.results.summary import priors_from_attrs, slot_values
 from skinfit.analysis.population.result import PopulationResult, PopulationWarning, WEAK_DATA
 from skinfit.analysis.population.inputs import subject_digest, subject_fits
 from skinfit.analysis.population.cache import cache_key, cacheable, read_cache, write_cache
@@ -67,7 +69,7 @@ def _prior_moments(prior, log):
 def _choose(first, parameters, family):
     """Slot names, families and population coordinates; the defaults stated."""
     slots = {s["name"]: s for s in first.attr("slots")}
-    priors = _priors_from_attrs(first.attrs)
+    priors = priors_from_attrs(first.attrs)
     if parameters is None:  # every model parameter; noise scales stay per subject
         model_params = _model_parameter_names(first)
         parameters = [n for n, s in slots.items() if s["base"] in model_params]
@@ -234,13 +236,13 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
     for s in subjects:
         f = fits[s]
         post_ds = f.group("posterior")
-        theta = np.column_stack([_slot_values(post_ds, slots[n]) for n in slots])
+        theta = np.column_stack([slot_values(post_ds, slots[n]) for n in slots])
         separate[s] = theta[:, [list(slots).index(n) for n in parameters]]
         contraction[s] = {}
         for n in parameters:
             prior = priors[slots[n]["base"]]
             q = prior.ppf((np.arange(2000) + 0.5) / 2000)
-            v = _slot_values(post_ds, slots[n])
+            v = slot_values(post_ds, slots[n])
             if prior.lower >= 0:
                 q, v = np.log(q), np.log(v)
             contraction[s][n] = float(1 - np.var(v) / np.var(q))

@@ -19,7 +19,7 @@ from skinfit.analysis.population.hierarchical import NU_T
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import replace_atomic
 from skinfit.io import integrity
-from skinfit.results.fit import as_generator
+from skinfit.io.arguments import as_generator
 
 __all__ = ["PopulationWarning", "DERIVED", "WEAK_DATA", "PopulationResult", "load_population"]
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from skinfit.analysis.population.hierarchical import NU_HYPER
 from skinfit.inference.sampling import run_emcee
-from skinfit.results.fit import _slot_values
+from skinfit.results.summary import slot_values
 
 __all__ = ["reweight"]
 
@@ -28,7 +28,7 @@ def reweight(fits, subjects, parameters, slots, priors, logs, centre, scale, cor
         cols, lp = [], 0.0
         for name, lg in zip(parameters, logs):
             prior = priors[slots[name]["base"]]
-            theta = _slot_values(post, slots[name])
+            theta = slot_values(post, slots[name])
             z = np.log(theta) if lg else theta
             lp = lp + prior.logpdf(theta) + (z if lg else 0.0)
             cols.append(z)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from skinfit.io.priors import _LOGPDF
+from skinfit.io.priors import LOG_DENSITIES
 from skinfit.posterior import standardised_squares
 
 __all__ = ["Subjects"]
@@ -66,9 +66,9 @@ class Subjects:
         for j in self.rest:
             pri = [post.slots[j].prior for post in posts]
             if all(q.dist == pri[0].dist and dict(q.args) == dict(pri[0].args) for q in pri):
-                self.rest_priors.append((j, None, _LOGPDF[pri[0].dist], pri[0].args))
+                self.rest_priors.append((j, None, LOG_DENSITIES[pri[0].dist], pri[0].args))
             else:
-                self.rest_priors += [(j, i, _LOGPDF[q.dist], q.args) for i, q in enumerate(pri)]
+                self.rest_priors += [(j, i, LOG_DENSITIES[q.dist], q.args) for i, q in enumerate(pri)]
 
     def transform(self, z):
         """Natural parameters and log-Jacobian of z (..., S, d) -> ((..., S, d), (..., S))."""
