@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from skinfit.plots import figures as plots
+from skinfit import plots
 from skinfit.report import figures
 from skinfit.report.figure_folder import MANIFEST
 from skinfit.results.fit import load_fit

@@ -12,7 +12,7 @@ import pytest
 from scipy import optimize, stats
 
 import skinfit
-from skinfit import integrity
+from skinfit.io import integrity
 from skinfit.errors import InputError
 from skinfit.io import integrity
 from pointwise import check_pointwise_groups

@@ -13,7 +13,7 @@ import pytest
 
 import skinfit
 from popdata import write_population
-from skinfit.plots import figures as plots
+from skinfit import plots
 from skinfit.report import figures
 from skinfit.report import html as report
 from skinfit.inference.checkpoint import CheckpointLock, _host, remove_stale_temps, temp_file
