@@ -31,10 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 from skinfit.analysis.groups import fit_by  # noqa: E402
-from skinfit.physics.contact_area import contact_area  # noqa: E402
 from skinfit.analysis.population.inputs import load_run  # noqa: E402
 from skinfit.analysis.population.population import population  # noqa: E402
 from skinfit.analysis.population.result import PopulationWarning  # noqa: E402
+from skinfit.physics.contact_area import contact_area  # noqa: E402
 
 # the simulated population of the 50/100-subject sizes: log-normal (median, sd of log) for the
 # positive parameters, normal (mean, sd) for the slopes with actuation force

@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.errors import InputError
+from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.io.units import parse_unit, si_unit
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

@@ -9,14 +9,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from pointwise import check_pointwise_groups
 from scipy import optimize, stats
 
 import skinfit
-from skinfit.io import integrity
 from skinfit.errors import InputError
-from skinfit.io import integrity
-from pointwise import check_pointwise_groups
 from skinfit.inference.optimize import find_map
+from skinfit.io import integrity
 from skinfit.posterior import Posterior
 from skinfit.report.checks import fit_diagnostics
 

@@ -23,13 +23,13 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from skinfit.io.arguments import shown
+from skinfit.analysis.groups import load_groups
+from skinfit.analysis.population.checks import check_prob, check_subjects
+from skinfit.analysis.population.inputs import subject_digest
 from skinfit.errors import InputError, InputTypeError
+from skinfit.io.arguments import shown
 from skinfit.results.fit import Fit, as_fit
 from skinfit.results.summary import slot_values
-from skinfit.analysis.groups import load_groups
-from skinfit.analysis.population.inputs import subject_digest
-from skinfit.analysis.population.checks import check_prob, check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
 

@@ -70,16 +70,24 @@ try:  # Unix only (Windows has none): a worker's peak memory, else not recorded 
 except ImportError:
     resource = None
 
-from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
-from skinfit.io.data import load_dataset
+from skinfit.analysis.groups import (
+    derive_seed,
+    group_dir,
+    group_labels,
+    index_document,
+    inside,
+    record_source,
+    source_problem,
+    write_json,
+)
 from skinfit.errors import ConvergenceWarning, InputError, error_line, require_optional
-from skinfit.results.fitting import fit
-from skinfit.analysis.groups import (derive_seed, group_dir, group_labels, index_document, inside, record_source,
-                                     source_problem, write_json)
-from skinfit.io.campaign_file import read_campaign_file
+from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from skinfit.inference.sampling import sampler_settings
-from skinfit.io.arguments import check_count
 from skinfit.inference.workers import check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
+from skinfit.io.arguments import check_count
+from skinfit.io.campaign_file import read_campaign_file
+from skinfit.io.data import load_dataset
+from skinfit.results.fitting import fit
 
 __all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit"]
 

@@ -26,10 +26,24 @@ from skinfit.inference.checkpoint import Checkpoint, load_checkpoint, run_identi
 from skinfit.inference.guardrails import assess_run
 from skinfit.inference.optimize import MAPResult, find_map, laplace_covariance
 from skinfit.inference.proposal import MixtureT
-from skinfit.inference.sampling import (CHECK_EVERY, SamplerRun, importance_start, initial_ball, run_emcee,
-                                        sampler_settings)
-from skinfit.io.arguments import (as_generator, available_memory, check_count, check_flag, check_mapping,
-                                  check_memory, check_output_file, check_path)
+from skinfit.inference.sampling import (
+    CHECK_EVERY,
+    SamplerRun,
+    importance_start,
+    initial_ball,
+    run_emcee,
+    sampler_settings,
+)
+from skinfit.io.arguments import (
+    as_generator,
+    available_memory,
+    check_count,
+    check_flag,
+    check_mapping,
+    check_memory,
+    check_output_file,
+    check_path,
+)
 from skinfit.io.data import Dataset, as_dataset
 from skinfit.io.models import Model, load_model
 from skinfit.io.priors import PriorSet, load_priors

@@ -174,7 +174,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         evaluated += len(z)
         try:
             return post(z)
-        except Exception as exc:  # noqa: BLE001 - emcee would print its traceback: kept, raised after the step
+        except Exception as exc:  # emcee would print its traceback: kept, raised after the step
             raised.append(exc)
             return np.full(len(z), -np.inf)
 
@@ -184,7 +184,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     sampler = emcee.EnsembleSampler(nwalkers, d, log_prob, vectorize=True, moves=moves, backend=backend)
     n = backend.iteration
     history, start = [], 0  # refits so far; the chain is homogeneous from ``start`` on
-    next_adapt = ADAPT_FIRST if indep is not None and ADAPT_FIRST < max_steps else None
+    next_adapt = ADAPT_FIRST if indep is not None and max_steps > ADAPT_FIRST else None
     # resumed: replay the refits on the saved chain (one due at the saved step itself follows
     # that step's check, in the loop)
     while next_adapt is not None and next_adapt < n:
@@ -346,7 +346,7 @@ def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rou
         informative += ess >= IMPORTANCE_MIN_ESS
         entry = {"draws": size, "ess": ess, "inside_support": int(finite.sum())}
         if informative:  # the weights say where the posterior is: population Monte Carlo
-            entry["refit"] = ess < IMPORTANCE_GOOD * size and IMPORTANCE_MIN_ESS <= ess and informative < rounds
+            entry["refit"] = ess < IMPORTANCE_GOOD * size and ess >= IMPORTANCE_MIN_ESS and informative < rounds
         else:  # degenerate so far: widen the proposal towards the posterior
             entry["refit"] = len(record) < tempered
             entry["beta"], w_beta = _tempered(log_w, finite, IMPORTANCE_MIN_ESS) if entry["refit"] else (None, None)

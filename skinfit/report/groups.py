@@ -20,8 +20,8 @@ import pandas as pd
 
 from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
 from skinfit.analysis.population.inputs import subject_digest
-from skinfit.analysis.population.result import DERIVED
 from skinfit.analysis.population.population import population as fit_population
+from skinfit.analysis.population.result import DERIVED
 from skinfit.errors import InputError
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
 from skinfit.report.tables import cells, file_part, not_applicable, unique_name

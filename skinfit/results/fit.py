@@ -32,8 +32,16 @@ from skinfit.io.priors import PriorSet
 from skinfit.io.provenance import input_lines, inputs_of
 from skinfit.posterior import Posterior
 from skinfit.results.store import fit_file, read_tree, write_tree
-from skinfit.results.summary import (SUMMARY_ATTR, SUMMARY_FORMAT, compute_summary, misfit_line, priors_from_attrs,
-                                     summary_from_attr, summary_to_attr, wall_time_text)
+from skinfit.results.summary import (
+    SUMMARY_ATTR,
+    SUMMARY_FORMAT,
+    compute_summary,
+    misfit_line,
+    priors_from_attrs,
+    summary_from_attr,
+    summary_to_attr,
+    wall_time_text,
+)
 
 __all__ = ["Fit", "load_fit", "as_fit", "as_fits", "rebuild_posterior", "plain_json", "GROUPS", "DEFERRED",
            "CACHED_ATTRS"]
@@ -313,7 +321,7 @@ class Fit:
             tree.attrs[integrity.SCHEMA_ATTR] = integrity.CHECKED_SCHEMA  # (before its summary's key is computed)
         try:
             tree.attrs[SUMMARY_ATTR] = summary_to_attr(self.summary(), self._summary_key())
-        except Exception as exc:  # noqa: BLE001 - the summary is only kept to save time: the fit is saved without it
+        except Exception as exc:  # the summary is only kept to save time: the fit is saved without it
             tree.attrs.pop(SUMMARY_ATTR, None)
             warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
                           f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)

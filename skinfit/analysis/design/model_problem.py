@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
+from skinfit.analysis.design.problem import DesignProblem, n_candidates
 from skinfit.errors import InputError
 from skinfit.io.labels import noise_suffix
-from skinfit.analysis.design.problem import DesignProblem, n_candidates
 
 __all__ = ["to_u", "log_coordinates", "model_problem", "prior_problem", "fit_density", "gaussian_density",
            "noise_setup"]

@@ -8,8 +8,8 @@ import time
 import numpy as np
 from scipy import special, stats
 
-from skinfit.analysis.evidence.log_evidence import LogEvidence
 from skinfit.analysis.evidence.bridge import mvn_logpdf
+from skinfit.analysis.evidence.log_evidence import LogEvidence
 
 __all__ = ["LaplaceError", "laplace"]
 

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from skinfit.errors import InputError
 from skinfit.analysis.groups import data_drift
+from skinfit.errors import InputError
 
 __all__ = ["check_arguments", "check_prob", "check_size", "check_subjects", "undetermined", "not_converged", "FAMILIES",
            "MAX_DRAW_BYTES"]
