@@ -290,7 +290,8 @@ def uniformity(ranks, n_draws, *, alpha=0.01, rng=None):
 
 def markdown_table(result):
     """The per-parameter table as Markdown, with the run's size and verdict."""
-    lines = [f"| parameter | mean rank (expect {result.n_draws / 2:.1f}) | bins | p chi2 | p KS | pass 1% | pass Bonferroni |", "|---|---|---|---|---|---|---|"]
+    lines = [f"| parameter | mean rank (expect {result.n_draws / 2:.1f}) | bins | p chi2 | p KS | pass 1% "
+             "| pass Bonferroni |", "|---|---|---|---|---|---|---|"]
     for name, r in result.table.iterrows():
         lines.append(f"| {name} | {r['mean_rank']:.1f} | {r['bins']} | {r['p_chi2']:.3g} | {r['p_ks']:.3g} | "
                      f"{'yes' if r['pass'] else 'NO'} | {'yes' if r['pass_bonferroni'] else 'NO'} |")

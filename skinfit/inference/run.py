@@ -285,5 +285,6 @@ def pointwise_thinning(post, nwalkers, ndraws):
         which = f"one draw of every {_ordinal(walker_step)} walker"
     kept = len(range(0, nw, walker_step)) * len(range(0, nd, every))
     note = (f"pointwise log-likelihood and predictive draws on {which} ({kept} of {nw * nd}): all draws would "
-            f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory ({_size(budget / MEMORY_FRACTION)})")
+            f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory "
+            f"({_size(budget / MEMORY_FRACTION)})")
     return every, walker_step, note

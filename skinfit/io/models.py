@@ -375,7 +375,7 @@ def parse_model_text(text, where, digest):
     if not model.observables:
         raise InputError(where, "a model needs at least one observable", field="observables")
     resolve("forward", model.forward_ref, where)
-    for pname, col in model.split.items():
+    for pname in model.split:
         if pname not in model.parameter_names:
             raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
     for pname in model.linear:

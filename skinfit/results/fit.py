@@ -218,7 +218,8 @@ class Fit:
         table = summary_from_attr(self._tree.attrs.get(SUMMARY_ATTR), key, self._slot_names())
         if table is None:
             table = self._compute_summary()
-        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.inference.guardrails, skinfit.inference.misfit)
+        # guard rails and misfit (skinfit.inference.guardrails, skinfit.inference.misfit)
+        table.attrs["warnings"] = self.warnings
         table.attrs["notes"] = self.notes  # information, not failures (skinfit.inference.guardrails)
         self._summary = (key, table)
         return table.copy()
@@ -281,7 +282,8 @@ class Fit:
         c = self.attr("support_counts")
         seed = int(self.attrs.get("seed", -1))
         seed_text = ("a numpy Generator (not recorded)" if seed < 0 else
-                     f"{seed}{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
+                     f"{seed}"
+                     f"{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
         lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.attrs['dataset_sha256'][:12]})",
                  *input_lines(self.attrs),
                  f"seed: {seed_text}",
@@ -297,7 +299,8 @@ class Fit:
                  "proposal: importance start, effective sample size "
                  + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
                  + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
-                 f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
+                 "during sampling at steps "
+                 f"{', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
                  f"wall time: {wall_time_text(t, self.pending)}",
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"

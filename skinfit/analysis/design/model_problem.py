@@ -107,7 +107,8 @@ def gaussian_density(loc, cov):
 
     def log_marginal(u, idx):
         idx = np.atleast_1d(idx)
-        return np.atleast_1d(stats.multivariate_normal(loc[idx], cov[np.ix_(idx, idx)]).logpdf(np.atleast_2d(u)[:, idx]))
+        return np.atleast_1d(
+            stats.multivariate_normal(loc[idx], cov[np.ix_(idx, idx)]).logpdf(np.atleast_2d(u)[:, idx]))
 
     return (lambda u: np.atleast_1d(dist.logpdf(u))), log_marginal
 

@@ -108,7 +108,8 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     if baseline is not None and not isinstance(baseline, (str, os.PathLike)):
         raise InputError("--baseline", f"expected a dataset id or path (got {type(baseline).__name__})")
     targets = list(names) if params is None else params
-    if isinstance(candidates, (str, os.PathLike)) or (isinstance(candidates, dict) and {"grid", "points"} & set(candidates)):
+    if isinstance(candidates, (str, os.PathLike)) or (
+            isinstance(candidates, dict) and {"grid", "points"} & set(candidates)):
         X, units = read_candidates(candidates, model)
     elif isinstance(candidates, (pd.DataFrame, Mapping)):
         X, units = si_candidates(candidates, model)

@@ -44,7 +44,7 @@ def posterior_draws(fit):
     for slot in post.slots:
         da = ds[slot.base]
         if slot.level is not None:
-            dim = [d for d in da.dims if d not in ("chain", "draw")][0]
+            dim = next(d for d in da.dims if d not in ("chain", "draw"))
             da = da.sel({dim: slot.level})
         cols.append(da.values.reshape(-1))
     return np.column_stack(cols)

@@ -149,7 +149,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         its inputs: every subject's label and fit content (:meth:`~skinfit.results.fit.Fit.content_hash`),
         the arguments above, the seed (an int ``rng`` only) and the code of skinfit and the
         versions of numpy and scipy; used only for fits of shipped, unchanged model cards (a
-        user's own forward function may change without the fits changing).  A call with the same inputs reads the same result from
+        user's own forward function may change without the fits changing).  A call with the same
+        inputs reads the same result from
         it instead of sampling (its warnings are warned again); other inputs, or an unreadable
         file, sample and rewrite it.
 
