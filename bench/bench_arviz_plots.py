@@ -433,7 +433,7 @@ def measure(ctx, figs, repeats, only):
                 path = figs / f"{figure}_{k}_{key}.png"
                 try:
                     _, _, fig = draw_once(func, fit, ctx, path)  # warm-up
-                except Exception as e:  # noqa: BLE001 - the failure is the row's result
+                except Exception as e:  # the failure is the row's result
                     rows.append({"figure": figure, "variant": variant, "fit": key, "error": f"{type(e).__name__}: {e}"})
                     print(figure, variant, key, "ERROR", e, file=sys.stderr)
                     continue

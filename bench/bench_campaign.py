@@ -29,9 +29,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 
-from popdata import write_population  # noqa: E402
+from popdata import write_population
 
-from skinfit.apps.campaign import run_campaign  # noqa: E402
+from skinfit.apps.campaign import run_campaign
 
 
 def main():
@@ -106,7 +106,6 @@ def threads_study(args):
     cell = {}
     for run in runs:
         cell.setdefault((run["workers"], run["threads"]), []).append(run["fit_s_sum"])
-    load = os.getloadavg()
     lines = ["", f"## BLAS/OpenMP threads per worker: summed fit time of {n} fits, 1 and 2 workers", "",
              f"Machine: {platform.machine()}, {os.cpu_count()} logical CPUs, Python {platform.python_version()}; shared "
              f"with other jobs (load average {min(r['load'] for r in runs):.1f}-{max(r['load'] for r in runs):.1f} "

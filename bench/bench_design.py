@@ -26,27 +26,26 @@ bench/results/design.md (``--estimators``: only its estimator section, replaced 
 """
 
 import argparse
-import importlib
 import hashlib
+import importlib
 import sys
 import time
 import warnings
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 import skinfit
-from skinfit.io import paths
-from skinfit.io import registry
-from skinfit.io.data import Dataset
 from skinfit.analysis.design.model_problem import log_coordinates, noise_setup, prior_problem
 from skinfit.analysis.design.problem import restrict_to_support
+from skinfit.io import paths, registry
+from skinfit.io.data import Dataset
 from skinfit.io.units import to_si
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import RESULTS, machine_info, machine_text  # noqa: E402
+from common import RESULTS, machine_info, machine_text
 
 design_mod = importlib.import_module("skinfit.analysis.design")  # the module (skinfit.design is the function)
 SIGMA = 0.02
@@ -446,7 +445,7 @@ def main(argv=None):
     ap.add_argument("--readme-seeds", default="1,2,3", help="fit seeds of the README case")
     ap.add_argument("--old", help="a copy of skinfit/design.py from before, measured beside the current one")
     args = ap.parse_args(argv)
-    started = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    started = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     if args.estimators:
         return estimator_section(args, started)
     speed_table, whole, dropped, speed_result = speed(args.seed)

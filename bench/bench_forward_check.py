@@ -8,7 +8,7 @@ per shipped model on its shipped dataset, the check (best of N) against one log-
 import platform
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +40,7 @@ def main(n=7):
         z = post.to_z(post.sample_prior(32, np.random.default_rng(1)))
         check, density = best(post._check_forward, n), best(lambda: post(z), n)
         rows.append(f"| {m} | {ds.id} | {post.n_unique} | {1e3 * check:.2f} | {1e3 * density:.2f} |")
-    now = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     text = "\n".join([
         "# Forward-contract check: cost per Posterior", "",
         f"Machine: {platform.node()} ({platform.machine()}), Python {platform.python_version()}, {now}; best of {n} "

@@ -35,11 +35,22 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from common import (
+    RESULTS,
+    Result,
+    machine_info,
+    machine_text,
+    posterior_for,
+    run_bare_emcee,
+    run_dynesty,
+    run_plain_emcee,
+    run_skinfit,
+    table,
+    throughput,
+)
+from fused import check_fused, make_fused
 
 import skinfit
-from common import (RESULTS, Result, machine_info, machine_text, posterior_for, run_bare_emcee, run_dynesty,
-                    run_plain_emcee, run_skinfit, table, throughput)
-from fused import check_fused, make_fused
 
 HERE = Path(__file__).resolve().parent
 POSTERIORS = {  # name -> (model, dataset, priors)

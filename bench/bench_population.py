@@ -30,11 +30,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from skinfit.analysis.groups import fit_by  # noqa: E402
-from skinfit.physics.contact_area import contact_area  # noqa: E402
-from skinfit.analysis.population.inputs import load_run  # noqa: E402
-from skinfit.analysis.population.population import population  # noqa: E402
-from skinfit.analysis.population.result import PopulationWarning  # noqa: E402
+from skinfit.analysis.groups import fit_by
+from skinfit.analysis.population.inputs import load_run
+from skinfit.analysis.population.population import population
+from skinfit.analysis.population.result import PopulationWarning
+from skinfit.physics.contact_area import contact_area
 
 # the simulated population of the 50/100-subject sizes: log-normal (median, sd of log) for the
 # positive parameters, normal (mean, sd) for the slopes with actuation force
@@ -137,7 +137,10 @@ def sizes(work, reweight, only=None):
     return rows
 
 
-def coverage(n_pop=20, seed=7, presses_list=(2, 6), hyper=(np.log(0.5), 0.05)):
+_HYPER = (np.log(0.5), 0.05)  # the fixed (mu, tau) of log mu of coverage()
+
+
+def coverage(n_pop=20, seed=7, presses_list=(2, 6), hyper=_HYPER):
     """Coverage and squared error of the shrunk and separate subject intervals over ``n_pop``
     simulated populations of 13 Coulomb subjects.  ``hyper``: the fixed (mu, tau) of log mu,
     or None to draw each population from the sampler's hyper-prior (then the shrunk intervals

@@ -26,12 +26,11 @@ import shutil
 import subprocess
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import machine_info, machine_text, timed_skinfit  # noqa: E402
-
+from common import machine_info, machine_text, timed_skinfit
 
 
 def timed(args, log, env=None):
@@ -44,7 +43,7 @@ def timed(args, log, env=None):
 
 def write_table(out, title, command, header, rows):
     """A markdown file: title, command and time, the machine, one table of ``rows``."""
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    stamp = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [f"# {title}", "", f"`{command}` - {stamp}", "", machine_text(machine_info()), "",
              "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(str(v) for v in row) + " |" for row in rows]
@@ -54,7 +53,6 @@ def write_table(out, title, command, header, rows):
 
 def _report_only(work, profile):
     """Rows (what, target, wall s, CPU text, load) of write_report on the demo's fits."""
-    import os
     import resource
 
     import skinfit.report.figures as figures

@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import timed_skinfit  # noqa: E402
+from common import timed_skinfit
 
 
 def run(args, env, log):

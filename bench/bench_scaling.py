@@ -13,9 +13,10 @@ import time
 import warnings
 
 import numpy as np
+from common import RESULTS, diagnostics, machine_info, machine_text, throughput
 
 import skinfit
-from common import RESULTS, diagnostics, machine_info, machine_text, throughput
+
 MODEL, DATA, PRIORS = "electroadhesion", "electroadhesion_synthetic", "electroadhesion"
 from skinfit.io.data import Dataset
 from skinfit.posterior import Posterior

@@ -26,11 +26,11 @@ from pathlib import Path
 import numpy as np
 
 import skinfit
-from skinfit.io.data import load_dataset
 from skinfit.apps.demo import _select, demo_plan
+from skinfit.io.data import load_dataset
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine_info  # noqa: E402
+from common import machine_info
 
 PROBS = (0.05, 0.5, 0.95)
 

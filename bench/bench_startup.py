@@ -23,11 +23,11 @@ import subprocess
 import sys
 import tempfile
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from common import machine_info, machine_text, user_env  # noqa: E402
+from common import machine_info, machine_text, user_env
 
 PY = sys.executable
 NO_DASK = "import sys; sys.modules['dask'] = None; "
@@ -104,7 +104,7 @@ def main():
                 cpu[name].append(used)
         imports = {name: importtime(cmd, tmp) for name, cmd, _ in cmds[1:4]}
     bare = statistics.median(times["python -c pass"])
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    stamp = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     flags = f" --source {args.source}" if args.source else ""
     lines = ["# Start-up: whole-process wall times of skinfit's commands", "",
              f"`.venv/bin/python bench/bench_startup.py --repeats {args.repeats}{flags}` - {stamp}", "",

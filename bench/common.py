@@ -25,8 +25,8 @@ import numpy as np
 
 import skinfit
 from skinfit.inference.run import default_walkers, start
-from skinfit.posterior import Posterior
 from skinfit.inference.sampling import _adapt, adaptive_moves, independence_move
+from skinfit.posterior import Posterior
 
 ESS_TARGET = 400
 RHAT_MAX = 1.01

@@ -75,7 +75,7 @@ def main(argv=None):
         rows.append(row(fit_of(item, args.work)))
         r = rows[-1]
         print(r["model"], r["bridge"].log_z, r.get("laplace", r.get("refusal")), flush=True)
-    lines = [f"# Laplace's evidence against bridge sampling (issue 39)\n",
+    lines = ["# Laplace's evidence against bridge sampling (issue 39)\n",
              f"skinfit {__version__}, {platform.machine()}, {os.cpu_count()} CPUs; "
              f"`python bench/laplace_bounds.py --work DIR --seed {args.seed}` on the fits of the demo plan "
              f"(seeds, rows and splits of `skinfit demo --seed {args.seed}`). log Z in nats. bridge: 3 repeats, "

@@ -30,7 +30,7 @@ import platform
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +39,8 @@ from scipy import stats
 
 import skinfit
 from skinfit import __version__
-from skinfit.inference.guardrails import BOUND_ALPHA
 from skinfit.analysis.misfit import simulated_check
+from skinfit.inference.guardrails import BOUND_ALPHA
 from skinfit.inference.misfit import ALPHA, check_fit
 from skinfit.io.models import load_model
 from skinfit.posterior import Posterior
@@ -289,7 +289,7 @@ def main(argv=None):
             f"--variants {args.variants} --long {args.long} --seed {args.seed} --jobs {args.jobs}"
             f"{' --only ' + args.only if args.only else ''}`, "
             f"{platform.machine()} ({os.cpu_count()} cores shared with other jobs, nice 10), "
-            f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, wall {wall / 60:.0f} min"
+            f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC, wall {wall / 60:.0f} min"
             + (f"; rows of kinds other than {', '.join(sorted(only))} read from the misfit.csv of an earlier run with "
                f"the same options.\n" if only else ".\n"),
             f"Misfit check: family-wise level {ALPHA} (Bonferroni over the m posterior-predictive p-values of a "

@@ -36,8 +36,8 @@ import numpy as np
 from skinfit.physics.ultrasonic import _bracket_series
 
 try:  # imported as bench.pymc_models, or as pymc_models from a script in bench/
-    from .common import PeakRSS, Result, diagnostics
-    from .fused import ultrasonic_interpolation
+    from bench.common import PeakRSS, Result, diagnostics
+    from bench.fused import ultrasonic_interpolation
 except ImportError:
     from common import PeakRSS, Result, diagnostics
     from fused import ultrasonic_interpolation

@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from popsim import run_sbc  # noqa: E402
+from popsim import run_sbc
 
 
 def main():

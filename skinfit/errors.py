@@ -8,8 +8,8 @@ than it passes to ``Exception.__init__`` inherits :class:`Portable`, and
 
 import pickle
 
-__all__ = ["InputError", "InputTypeError", "ForwardError", "ConvergenceWarning", "SupportWarning", "IntegrityWarning", "MissingDependency",
-           "require_optional", "Portable", "WorkerError", "portable", "error_line"]
+__all__ = ["InputError", "InputTypeError", "ForwardError", "ConvergenceWarning", "SupportWarning", "IntegrityWarning",
+           "MissingDependency", "require_optional", "Portable", "WorkerError", "portable", "error_line"]
 
 
 class Portable:

@@ -15,13 +15,13 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from skinfit.io.data import Column, Dataset
 from skinfit.analysis.population.hierarchical import NU_HYPER
-from skinfit.io.models import load_model
 from skinfit.analysis.population.inputs import DrawsFit
 from skinfit.analysis.population.population import _prior_moments
-from skinfit.posterior import Posterior
+from skinfit.io.data import Column, Dataset
+from skinfit.io.models import load_model
 from skinfit.io.priors import load_priors
+from skinfit.posterior import Posterior
 
 MODEL = "electroadhesion_coulomb"
 LEVELS = (0.3, 1.0)  # normal forces [N]

@@ -5,7 +5,6 @@ image loaded, no console error. Skipped, with the reason shown, when Chromium is
 from pathlib import Path
 
 import pytest
-
 from browser import chromium, inspect
 
 ROOT = Path(__file__).resolve().parents[1]

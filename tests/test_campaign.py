@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
+from skinfit.analysis.groups import derive_seed
 from skinfit.apps.campaign import load_campaign, run_campaign
 from skinfit.apps.cli import main
-from skinfit.analysis.groups import derive_seed
 
 DASK = Path(sys.executable).parent / "dask"
 

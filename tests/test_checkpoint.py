@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.inference.checkpoint import Checkpoint, load_checkpoint
 from skinfit.errors import InputError
-from skinfit.io.arguments import as_generator
+from skinfit.inference.checkpoint import Checkpoint, load_checkpoint
 from skinfit.inference.optimize import MAPResult, laplace_covariance
-from skinfit.posterior import Posterior
 from skinfit.inference.proposal import MixtureT
 from skinfit.inference.sampling import check_points, initial_ball, run_emcee
+from skinfit.io.arguments import as_generator
+from skinfit.posterior import Posterior
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL, DATA = "electroadhesion_coulomb", "electroadhesion_synthetic"

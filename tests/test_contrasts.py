@@ -4,9 +4,9 @@ import warnings
 
 import numpy as np
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
 from skinfit.analysis.contrasts import contrast, fit_contrasts, hdi, level_contrasts
 from skinfit.analysis.groups import fit_by, load_groups
 

@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.errors import InputError
+from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.io.units import parse_unit, si_unit
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
@@ -124,7 +124,7 @@ def test_class5_special_files_refused_before_reading(ds_dir, tmp_path):
     (tmp_path / "dir.csv").mkdir()
     for path, kind in ((fifo, "a FIFO"), (tmp_path / "dir.csv", "a directory"), (Path("/dev/zero"), "a device")):
         with pytest.raises(InputError, match=rf"is {kind}, not a regular file"):
-            load_dataset(str(path) if path.suffix == ".csv" else str(path), model="electroadhesion")
+            load_dataset(str(path), model="electroadhesion")
     # a card's data file that is a FIFO inside the folder: refused (not waited on)
     (ds_dir / "data.csv").unlink()
     os.mkfifo(ds_dir / "data.csv")

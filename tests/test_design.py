@@ -10,9 +10,16 @@ import pandas as pd
 import pytest
 
 import skinfit
+from skinfit.analysis.design import (
+    batch_eig,
+    discrimination_plan,
+    eig_nmc,
+    gaussian_problem,
+    greedy_plan,
+    laplace_design,
+    read_candidates,
+)
 from skinfit.apps.cli import main
-from skinfit.analysis.design import (batch_eig, discrimination_plan, eig_nmc, gaussian_problem, greedy_plan,
-                            laplace_design, read_candidates)
 from skinfit.errors import InputError
 
 SIGMA = 0.5
@@ -225,8 +232,8 @@ def test_skinfit_report_shows_a_design_folder_as_a_section(tmp_path, capsys):
     comes back equal (load_design) and the report carries its section, figure and plan."""
     import re
 
-    from skinfit.apps.cli import main
     from skinfit.analysis.design import load_design
+    from skinfit.apps.cli import main
 
     cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
                                                                                           "values": [0, 200]}}}
@@ -273,9 +280,7 @@ def plane_fit(tmp_path_factory):
     the card and prior file: a CLI call resets the search path, so a test sets it again)."""
     import linear_gaussian as lg
 
-    from skinfit.io import paths
-
-    from skinfit.io import registry
+    from skinfit.io import paths, registry
 
     folder = tmp_path_factory.mktemp("plane")
     (folder / "models").mkdir()

@@ -9,9 +9,8 @@ from scipy import stats
 from scipy.special import logsumexp
 
 import skinfit
-from skinfit.apps.cli import main
 from skinfit.analysis.evidence import LaplaceError, bayes_factor_strength, bridge_sampling, laplace, nested
-
+from skinfit.apps.cli import main
 
 # ---- a linear-Gaussian model: log Z in closed form ----------------------------------------
 

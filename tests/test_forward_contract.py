@@ -19,8 +19,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.io import registry
 from skinfit.errors import ForwardError, InputError
+from skinfit.io import registry
 from skinfit.io.forward_check import CHECK_DRAWS
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

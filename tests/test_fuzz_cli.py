@@ -27,8 +27,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from popdata import write_population
+
 from skinfit.apps.cli import build_parser, main
 
 MODEL, DATASET = "electroadhesion_coulomb", "electroadhesion_synthetic"

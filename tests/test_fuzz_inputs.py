@@ -18,11 +18,11 @@ from hypothesis import strategies as st
 
 import skinfit
 from skinfit.apps.campaign import load_campaign
-from skinfit.io.data import load_dataset
 from skinfit.errors import InputError
+from skinfit.io.data import load_dataset
 from skinfit.io.models import load_model
-from skinfit.posterior import Posterior
 from skinfit.io.priors import load_priors
+from skinfit.posterior import Posterior
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA_DIR = ROOT / "datasets" / "electroadhesion_synthetic"

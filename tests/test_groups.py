@@ -6,11 +6,11 @@ import warnings
 
 import numpy as np
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
-from skinfit.apps.cli import main
 from skinfit.analysis.groups import derive_seed, fit_by, group_labels, load_groups
+from skinfit.apps.cli import main
 
 
 def test_derive_seed_stable_and_keyed():

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import skinfit
-from skinfit.inference import guardrails
 from skinfit.apps.cli import main
+from skinfit.inference import guardrails
+from skinfit.inference.sampling import SamplerRun
 from skinfit.posterior import Posterior
 from skinfit.report.checks import fit_diagnostics
-from skinfit.inference.sampling import SamplerRun
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL, DATA = "electroadhesion_empirical", "electroadhesion_synthetic"
@@ -161,8 +161,8 @@ def _simulated_csv(path, seed):
     """Data simulated from electroadhesion at its shipped design with parameters drawn from its
     prior, drawn as skinfit.analysis.misfit.simulated_check draws them, written as a CSV with units in
     its header; and the fit seed simulated_check uses."""
-    from skinfit.posterior import Posterior
     from skinfit.analysis.sbc import design_dataset
+    from skinfit.posterior import Posterior
 
     model = skinfit.load_model(E2E)
     rng = np.random.default_rng(seed)

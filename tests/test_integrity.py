@@ -14,10 +14,10 @@ import pytest
 import xarray as xr
 
 import skinfit
-from skinfit.io import integrity
-from skinfit.apps.cli import main
 from skinfit.analysis.compare import loo_record
+from skinfit.apps.cli import main
 from skinfit.errors import IntegrityWarning
+from skinfit.io import integrity
 
 SUBJECTS = ("S01", "S02", "S03")
 

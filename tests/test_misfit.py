@@ -12,12 +12,12 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.results.run_labels import run_labels
 from skinfit.analysis.misfit import simulated_check
 from skinfit.inference.misfit import ALPHA, MisfitWarning, check_fit
 from skinfit.posterior import Posterior
 from skinfit.report.checks import fit_diagnostics
 from skinfit.report.html import _as_fits
+from skinfit.results.run_labels import run_labels
 
 #: electroadhesion_coulomb parameters for the issue's case (mu, E_star, d_air, sigma), near
 #: the shipped electroadhesion data's: friction 0.6, 35 kPa, 0.19 um air gap, 20 mN noise

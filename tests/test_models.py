@@ -63,7 +63,7 @@ def test_missing_shipped_cards_say_where_they_were_looked_for(tmp_path, monkeypa
     import skinfit.io.registry
 
     monkeypatch.setattr(skinfit.io.paths, "shipped_root", lambda: None)
-    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", lambda: [])
+    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", list)
     monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: tmp_path / "user")
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
     for load, kind in ((skinfit.load_model, "models"), (skinfit.load_priors, "priors"),

@@ -8,9 +8,9 @@ import shutil
 import warnings
 
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
 from skinfit.apps.campaign import check_campaign_out, load_campaign
 from skinfit.apps.cli import main
 

@@ -10,14 +10,14 @@ import warnings
 
 import pandas as pd
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
 from skinfit import plots
+from skinfit.analysis.groups import fit_by
+from skinfit.inference.checkpoint import CheckpointLock, _host, remove_stale_temps, temp_file
 from skinfit.report import figures
 from skinfit.report import html as report
-from skinfit.inference.checkpoint import CheckpointLock, _host, remove_stale_temps, temp_file
-from skinfit.analysis.groups import fit_by
 
 
 def _dead_pid():

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 
 import skinfit
-import skinfit.io.registry
 import skinfit.io.paths
+import skinfit.io.registry
 from skinfit.apps.cli import main
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
@@ -30,7 +30,7 @@ def isolated(tmp_path, monkeypatch):
     """A search path with no $SKINFIT_PATH, no --path, no plug-in folders and an empty user
     folder under tmp_path."""
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
-    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", lambda: [])
+    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", list)
     monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: tmp_path / "user")
     skinfit.io.paths.set_search_path([])
     yield tmp_path

@@ -8,9 +8,15 @@ import pytest
 from scipy import stats
 
 import skinfit
-from skinfit.physics.contact_area import (area_impedance_law, contact_area, contact_area_hertz,
-                                          contact_area_no_levitation, derived, derived_hertz,
-                                          derived_no_levitation)
+from skinfit.physics.contact_area import (
+    area_impedance_law,
+    contact_area,
+    contact_area_hertz,
+    contact_area_no_levitation,
+    derived,
+    derived_hertz,
+    derived_no_levitation,
+)
 from skinfit.posterior import Posterior
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

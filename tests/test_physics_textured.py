@@ -5,8 +5,14 @@ import pytest
 from scipy import integrate, optimize
 
 import skinfit
-from skinfit.physics.textured import (contact_state, critical_load, reduced_modulus, textured_no_hysteresis,
-                                      textured_no_transition, textured_surface)
+from skinfit.physics.textured import (
+    contact_state,
+    critical_load,
+    reduced_modulus,
+    textured_no_hysteresis,
+    textured_no_transition,
+    textured_surface,
+)
 
 C = dict(skinfit.load_model("textured_surface").constants)
 # the Biotribology 2019 paper Table 1: (R_asp, h, lambda) [m] and E_m [Pa] of the eight textured samples

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from recovery import check_coverage
 
 import skinfit
-from recovery import check_coverage
 from skinfit.physics.wavy import ball_bearing_ratio, slope, two_point_ratio
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]

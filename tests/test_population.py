@@ -8,18 +8,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from popdata import MU_MEDIAN, TAU, write_population
+from popsim import draw_population, quadrature, run_sbc, subject_fits
 from scipy import stats
 
 import skinfit
-from popdata import MU_MEDIAN, TAU, write_population
-from popsim import draw_population, quadrature, run_sbc, subject_fits
-from skinfit.apps.cli import main
-from skinfit.errors import InputError
 from skinfit.analysis.groups import fit_by
 from skinfit.analysis.population.inputs import load_run
 from skinfit.analysis.population.population import population, population_tables
 from skinfit.analysis.population.result import PopulationResult, PopulationWarning, load_population
 from skinfit.analysis.population.reweight import _cholesky_corr
+from skinfit.apps.cli import main
+from skinfit.errors import InputError
 
 
 @pytest.fixture(scope="module")
@@ -342,8 +342,8 @@ def test_a_population_records_its_fits_by_content_and_its_seed(thirteen, cli_res
     which reproduces it."""
     import xarray as xr
 
-    from skinfit.results.fit import load_fit
     from skinfit.analysis.population.inputs import subject_digest
+    from skinfit.results.fit import load_fit
 
     run, fits, _ = thirteen
     back = cli_result[2]
@@ -447,14 +447,14 @@ def test_gibbs_hyper_posterior_is_the_same_in_product_shift_and_shear_coordinate
 
     import arviz as az
 
-    from skinfit.io.data import load_dataset
-    from skinfit.results.summary import slot_values
     from skinfit.analysis.groups import group_labels
+    from skinfit.analysis.population.inputs import DrawsFit
+    from skinfit.io.data import load_dataset
     from skinfit.io.models import load_model
     from skinfit.io.paths import shipped_root
-    from skinfit.analysis.population.inputs import DrawsFit
-    from skinfit.posterior import Posterior
     from skinfit.io.priors import load_priors
+    from skinfit.posterior import Posterior
+    from skinfit.results.summary import slot_values
 
     _sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
     from bench_population_weak import three_subjects

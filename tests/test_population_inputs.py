@@ -27,16 +27,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
-from skinfit.apps.cli import build_parser, main
 from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
-from skinfit.errors import InputError
 from skinfit.analysis.groups import fit_by, load_groups
 from skinfit.analysis.population.inputs import load_run
 from skinfit.analysis.population.population import population
 from skinfit.analysis.population.result import PopulationWarning, load_population
+from skinfit.apps.cli import build_parser, main
+from skinfit.errors import InputError
 
 SOURCES = (*(f"analysis/population/{m}.py" for m in ("population", "checks", "hierarchical", "inputs", "result",
                                                      "reweight", "cache", "subjects")),
@@ -412,12 +412,12 @@ def test_class_non_convergence_the_proposal_maps_the_population_through_product_
     u = log theta enters the subjects' proposals through du/dz, whose beta0 row is, from the
     card, d log beta0 = dX / X - d log tau0 + 2/3 d log E_star (the old proposal treated z as
     log theta or theta and accepted 0.5% of a 3-subject population's draws)."""
-    from skinfit.io.data import load_dataset
     from skinfit.analysis.population.hierarchical import Spec
     from skinfit.analysis.population.subjects import Subjects
+    from skinfit.io.data import load_dataset
     from skinfit.io.models import load_model
-    from skinfit.posterior import Posterior
     from skinfit.io.priors import load_priors
+    from skinfit.posterior import Posterior
 
     post = Posterior(load_model("electroadhesion"), load_priors("electroadhesion"),
                      load_dataset("electroadhesion_synthetic"))

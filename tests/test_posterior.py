@@ -11,7 +11,6 @@ import skinfit
 from skinfit.inference.optimize import find_map
 from skinfit.posterior import Posterior
 
-
 #: The shipped data set of each model used here.
 SHIPPED = {"electroadhesion": "electroadhesion_synthetic", "electroadhesion_empirical": "electroadhesion_synthetic",
            "textured_surface": "textured_synthetic", "textured_no_transition": "textured_synthetic",

@@ -33,7 +33,7 @@ def _sha(path):
 def user(tmp_path, monkeypatch):
     """An empty user folder under tmp_path, no $SKINFIT_PATH, --path or plug-in folders."""
     monkeypatch.delenv("SKINFIT_PATH", raising=False)
-    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", lambda: [])
+    monkeypatch.setattr(skinfit.io.registry, "plugin_folders", list)
     monkeypatch.setattr(skinfit.io.paths, "user_root", lambda: tmp_path / "user")
     skinfit.io.paths.set_search_path([])
     yield tmp_path / "user"

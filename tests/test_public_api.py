@@ -81,4 +81,4 @@ def test_negative_control_a_changed_signature_or_member_is_seen():
     assert describe(fit) != FROZEN["fit"]
     assert describe(Fit) != FROZEN["Fit"]
     with pytest.raises(AttributeError, match="has no attribute 'fitt'"):
-        skinfit.fitt  # noqa: B018 - a name that is not public is an error, not None
+        skinfit.fitt

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from scipy import stats
-
-import skinfit
 from pointwise import check_pointwise_groups
 from recovery import check_coverage as _check_coverage
 from recovery import coverage as _coverage
+from scipy import stats
+
+import skinfit
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 TEXTURED = ROOT / "datasets" / "textured_synthetic"

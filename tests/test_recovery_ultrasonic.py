@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from recovery import check_coverage
 
 import skinfit
 from skinfit import plots
-from recovery import check_coverage
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 DATA = ROOT / "datasets" / "ultrasonic_synthetic"

@@ -63,7 +63,6 @@ def test_an_unknown_key_is_refused_at_load(tmp_path):
 
 
 def test_a_references_file_on_the_search_path_adds_keys(tmp_path, monkeypatch):
-    import skinfit.io.paths
 
     (tmp_path / "references.toml").write_text('schema_version = 1\n[mylab2026]\ntitle = "Our own model"\n'
                                               'authors = ["A. Researcher"]\nyear = 2026\n')

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 import skinfit
-from skinfit.io import registry
 from skinfit.errors import InputError
+from skinfit.io import registry
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 EA = (ROOT / "models" / "electroadhesion.toml").read_text()

@@ -364,7 +364,6 @@ def test_a_report_with_nothing_to_draw_reads_the_stored_summary_and_imports_no_s
     report's, whose summary was computed (the file had none stored then)."""
     import shutil
     import subprocess
-    import sys
 
     import xarray as xr
 
@@ -426,7 +425,6 @@ def test_figure_workers_end_when_the_report_process_is_killed(ea_fit, tmp_path):
     rather than drawing on as orphans."""
     import signal
     import subprocess
-    import sys
     import time
 
     ea_fit.save(tmp_path / "fit.nc")

@@ -175,8 +175,8 @@ def test_report_of_a_run_shows_the_population_saved_for_its_fits_and_never_anoth
     """`skinfit population RUN` (the user's choices: two parameters, correlated) then `skinfit
     report RUN`: the report shows that population, saying where it is from; once a subject is
     fitted again, the saved one is named as made from other fits and not shown."""
-    from skinfit.apps.cli import main
     from skinfit.analysis.population.result import load_population
+    from skinfit.apps.cli import main
 
     run = _by_run(subject_fits, tmp_path / "run")
     with warnings.catch_warnings():
@@ -290,8 +290,9 @@ def test_tables_whose_names_differ_only_in_letters_a_file_name_cannot_hold_get_t
     """Two contrast tables titled by subjects Zoë and Zoé (file_part makes both Zo_): each is
     written to its own CSV, linked from its own section, holding its own rows; nothing is
     overwritten."""
-    from skinfit.analysis.contrasts import contrast
     from test_report import _parse
+
+    from skinfit.analysis.contrasts import contrast
 
     rng = np.random.default_rng(3)
 

@@ -10,9 +10,9 @@ import numpy as np
 import skinfit
 from skinfit.inference import sampling
 from skinfit.inference.optimize import find_map
-from skinfit.posterior import Posterior
 from skinfit.inference.proposal import MixtureT
 from skinfit.inference.sampling import ADAPT_FIRST, initial_ball, integrated_time, run_emcee
+from skinfit.posterior import Posterior
 
 BENCH_PRIORS = Path(__file__).parents[1] / "bench" / "priors_electroadhesion_uniform.toml"
 

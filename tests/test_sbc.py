@@ -11,8 +11,8 @@ import pandas as pd
 import pytest
 
 import skinfit
-from skinfit.apps.cli import main
 from skinfit.analysis.sbc import n_bins, run_sbc, uniformity
+from skinfit.apps.cli import main
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL = "electroadhesion_coulomb"  # 4 parameters, ~3 s per fit on 40 rows

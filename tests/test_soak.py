@@ -23,9 +23,9 @@ import numpy as np
 import pandas as pd
 import psutil
 import pytest
+from popdata import write_population
 
 import skinfit
-from popdata import write_population
 from skinfit.apps.campaign import load_campaign, run_campaign, run_fit
 
 SEED = int(os.environ.get("SKINFIT_TEST_SEED", "21"))

@@ -14,8 +14,8 @@ from scipy import stats
 
 import skinfit
 from skinfit.apps.cli import main
-from skinfit.posterior import Posterior
 from skinfit.io.references import parse_source, references
+from skinfit.posterior import Posterior
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 

@@ -16,11 +16,11 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
+from worker_jobs import die_on, instance, raise_instance, threads_in_worker, zero_force
 
 import skinfit
 from skinfit.errors import InputError, MissingDependency, Portable, WorkerError, error_line, portable
 from skinfit.inference.workers import THREAD_VARIABLES, check_scheduler, run_isolated
-from worker_jobs import die_on, instance, raise_instance, threads_in_worker, zero_force
 
 
 def _modules():
@@ -218,8 +218,8 @@ def test_forkable_only_without_other_threads():
 @pytest.mark.parametrize("entry", ["run_sbc", "run_demo"])
 @pytest.mark.parametrize("jobs", [0, -2, "2", 1.5, True])
 def test_process_counts_of_the_python_entry_points_are_checked_before_any_work(entry, jobs, tmp_path):
-    from skinfit.apps.demo import run_demo
     from skinfit.analysis.sbc import run_sbc
+    from skinfit.apps.demo import run_demo
 
     call = {"run_sbc": lambda: run_sbc("electroadhesion_coulomb", n_sims=2, jobs=jobs),
             "run_demo": lambda: run_demo(tmp_path / "d", tmp_path / "r", jobs=jobs)}[entry]

@@ -11,9 +11,9 @@ import pandas as pd
 import xarray as xr
 from arviz_stats import loo as az_loo
 
-from skinfit.io.arguments import check_seed
-from skinfit.errors import InputError
 from skinfit.analysis.evidence import METHODS, bayes_factor_strength, evidence
+from skinfit.errors import InputError
+from skinfit.io.arguments import check_seed
 from skinfit.results.fit import Fit, as_fits
 from skinfit.results.run_labels import run_labels
 

@@ -23,13 +23,13 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
-from skinfit.io.arguments import shown
+from skinfit.analysis.groups import load_groups
+from skinfit.analysis.population.checks import check_prob, check_subjects
+from skinfit.analysis.population.inputs import subject_digest
 from skinfit.errors import InputError, InputTypeError
+from skinfit.io.arguments import as_generator, shown
 from skinfit.results.fit import Fit, as_fit
 from skinfit.results.summary import slot_values
-from skinfit.analysis.groups import load_groups
-from skinfit.analysis.population.inputs import subject_digest
-from skinfit.analysis.population.checks import check_prob, check_subjects
 
 __all__ = ["draws", "contrast", "level_contrasts", "fit_contrasts"]
 
@@ -121,11 +121,10 @@ def fit_contrasts(fits: Mapping[str, Fit], parameter: str, rng: int | np.random.
     rng : int, None or numpy.random.Generator
         Used to resample every posterior to the shortest length before pairing by index.
     """
-    if not isinstance(rng, (int, np.integer, np.random.Generator)) or isinstance(rng, bool) or (
-            isinstance(rng, (int, np.integer)) and rng < 0):
-        if rng is not None:
-            raise InputError("fit_contrasts", f"expected a seed >= 0, None or a numpy Generator (got {rng!r})",
-                             field="rng")
+    if rng is not None and (not isinstance(rng, (int, np.integer, np.random.Generator)) or isinstance(rng, bool) or (
+            isinstance(rng, (int, np.integer)) and rng < 0)):
+        raise InputError("fit_contrasts", f"expected a seed >= 0, None or a numpy Generator (got {rng!r})",
+                         field="rng")
     rng = as_generator(rng)
     _check_parameter(parameter, prob, "fit_contrasts")
     if isinstance(fits, (str, os.PathLike)):

@@ -32,12 +32,12 @@ import pandas as pd
 
 from skinfit.errors import InputError, error_line
 from skinfit.inference.checkpoint import CheckpointLock, load_checkpoint, remove_stale_temps, replace_atomic
+from skinfit.inference.run import resolve_inputs
 from skinfit.io.arguments import check_input_file, check_path, size_text
 from skinfit.io.data import Dataset, load_dataset
+from skinfit.io.labels import level_labels
 from skinfit.io.paths import shipped_root
 from skinfit.io.provenance import input_lines, input_record
-from skinfit.io.labels import level_labels
-from skinfit.inference.run import resolve_inputs
 from skinfit.results.fit import Fit, load_fit
 from skinfit.results.fitting import fit
 
@@ -483,7 +483,7 @@ def _checkpoint_text(path):
     """How far the checkpoint at ``path`` got, in words (its iteration), or that it is unreadable."""
     try:
         return f"checkpoint.h5 at step {load_checkpoint(path).iteration}"
-    except Exception:  # noqa: BLE001 - only said in a message: any unreadable file is just named
+    except Exception:  # only said in a message: any unreadable file is just named
         return "checkpoint.h5, unreadable"
 
 

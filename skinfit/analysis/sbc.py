@@ -32,17 +32,17 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from skinfit.io.arguments import check_count, check_memory, check_number, shown
-from skinfit.io.data import Dataset, list_datasets, load_dataset
 from skinfit.errors import ConvergenceWarning, InputError, InputTypeError
 from skinfit.inference.run import check_sizes, default_walkers
-from skinfit.results.fitting import fit
-from skinfit.results.summary import slot_values
+from skinfit.inference.workers import forkable
+from skinfit.io.arguments import check_count, check_memory, check_number, shown
+from skinfit.io.data import Dataset, list_datasets, load_dataset
 from skinfit.io.models import Model, load_model
 from skinfit.io.outputs import check_outputs
-from skinfit.posterior import Posterior
 from skinfit.io.priors import PriorSet, load_priors
-from skinfit.inference.workers import forkable
+from skinfit.posterior import Posterior
+from skinfit.results.fitting import fit
+from skinfit.results.summary import slot_values
 
 __all__ = ["SBCResult", "run_sbc", "design_dataset", "uniformity", "write_sbc", "markdown_table", "FILES"]
 
@@ -290,8 +290,8 @@ def uniformity(ranks, n_draws, *, alpha=0.01, rng=None):
 
 def markdown_table(result):
     """The per-parameter table as Markdown, with the run's size and verdict."""
-    lines = ["| parameter | mean rank (expect {:.1f}) | bins | p chi2 | p KS | pass 1% | pass Bonferroni |".format(
-        result.n_draws / 2), "|---|---|---|---|---|---|---|"]
+    lines = [f"| parameter | mean rank (expect {result.n_draws / 2:.1f}) | bins | p chi2 | p KS | pass 1% "
+             "| pass Bonferroni |", "|---|---|---|---|---|---|---|"]
     for name, r in result.table.iterrows():
         lines.append(f"| {name} | {r['mean_rank']:.1f} | {r['bins']} | {r['p_chi2']:.3g} | {r['p_ks']:.3g} | "
                      f"{'yes' if r['pass'] else 'NO'} | {'yes' if r['pass_bonferroni'] else 'NO'} |")

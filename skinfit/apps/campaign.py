@@ -70,16 +70,24 @@ try:  # Unix only (Windows has none): a worker's peak memory, else not recorded 
 except ImportError:
     resource = None
 
-from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
-from skinfit.io.data import load_dataset
+from skinfit.analysis.groups import (
+    derive_seed,
+    group_dir,
+    group_labels,
+    index_document,
+    inside,
+    record_source,
+    source_problem,
+    write_json,
+)
 from skinfit.errors import ConvergenceWarning, InputError, error_line, require_optional
-from skinfit.results.fitting import fit
-from skinfit.analysis.groups import (derive_seed, group_dir, group_labels, index_document, inside, record_source,
-                                     source_problem, write_json)
-from skinfit.io.campaign_file import read_campaign_file
+from skinfit.inference.checkpoint import CheckpointLock, remove_stale_temps, replace_atomic
 from skinfit.inference.sampling import sampler_settings
-from skinfit.io.arguments import check_count
 from skinfit.inference.workers import check_scheduler, collect, crossing, limited_threads, run_isolated, thread_count
+from skinfit.io.arguments import check_count
+from skinfit.io.campaign_file import read_campaign_file
+from skinfit.io.data import load_dataset
+from skinfit.results.fitting import fit
 
 __all__ = ["Campaign", "load_campaign", "run_campaign", "run_fit"]
 
@@ -280,54 +288,53 @@ def _run_locked(campaign, scheduler, workers, threads, echo):
     out = campaign.out
     check_campaign_out(campaign)
     stale = remove_stale_temps(out)
-    log = open(out / "campaign.log", "a", buffering=1)
-    for p in stale:
-        log.write(f"{_now()} removed {os.path.relpath(p, out)} (left by a killed writer)\n")
-    executor = scheduler or f"processes x {workers}"
-    log.write(f"{_now()} start {campaign.path} ({len(campaign.tasks)} fits, executor {executor})\n")
-    rows, todo = [], []
-    for i, task in enumerate(campaign.tasks):
-        row = {"model": task["model"], "dataset": task["dataset"], "group": task["group"], "seed": task["seed"],
-               "status": "pending", "seconds": np.nan, "converged": None,
-               "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan, "threads": None,
-               "dataset_path": task["dataset_ref"], "dataset_sha256": task["sha256"]["dataset"]}
-        done, problem = _completed(task)
-        if problem is not None:
-            echo(f"  stale    {_key(task)}: the saved fit is not reused: {problem}")
-            log.write(f"{_now()} stale {_key(task)}: {problem}\n")
-        if done is not None:
-            row.update({k: done.get(k) for k in ("seconds", "converged", "worker", "peak_rss_mb", "threads")},
-                       status="complete")
-            log.write(f"{_now()} skip {_key(task)} (complete)\n")
-        else:
-            todo.append(i)
-        rows.append(row)
-    _write_index(out, rows)
-    echo(f"campaign {campaign.path}: {len(campaign.tasks)} fits, {len(campaign.tasks) - len(todo)} already "
-         f"complete, {len(todo)} to run ({executor})")
-
-    def finish(i, record=None, error=None):
-        task = campaign.tasks[i]
-        if error is None:
-            rows[i].update(record)
-            log.write(f"{_now()} done {_key(task)} {record['seconds']:.2f} s converged={record['converged']}\n")
-        else:
-            rows[i].update(status=f"failed: {error_line(error)}")
-            log.write(f"{_now()} failed {_key(task)}: {error_line(error)}\n")
+    with open(out / "campaign.log", "a", buffering=1) as log:
+        for p in stale:
+            log.write(f"{_now()} removed {os.path.relpath(p, out)} (left by a killed writer)\n")
+        executor = scheduler or f"processes x {workers}"
+        log.write(f"{_now()} start {campaign.path} ({len(campaign.tasks)} fits, executor {executor})\n")
+        rows, todo = [], []
+        for i, task in enumerate(campaign.tasks):
+            row = {"model": task["model"], "dataset": task["dataset"], "group": task["group"], "seed": task["seed"],
+                   "status": "pending", "seconds": np.nan, "converged": None,
+                   "path": os.path.relpath(task["path"], out), "worker": "", "peak_rss_mb": np.nan, "threads": None,
+                   "dataset_path": task["dataset_ref"], "dataset_sha256": task["sha256"]["dataset"]}
+            done, problem = _completed(task)
+            if problem is not None:
+                echo(f"  stale    {_key(task)}: the saved fit is not reused: {problem}")
+                log.write(f"{_now()} stale {_key(task)}: {problem}\n")
+            if done is not None:
+                row.update({k: done.get(k) for k in ("seconds", "converged", "worker", "peak_rss_mb", "threads")},
+                           status="complete")
+                log.write(f"{_now()} skip {_key(task)} (complete)\n")
+            else:
+                todo.append(i)
+            rows.append(row)
         _write_index(out, rows)
-        echo(f"  {rows[i]['status']:8s} {_key(task)}" + (f"  {rows[i]['seconds']:.1f} s, converged="
-                                                        f"{rows[i]['converged']}" if error is None else ""))
+        echo(f"campaign {campaign.path}: {len(campaign.tasks)} fits, {len(campaign.tasks) - len(todo)} already "
+             f"complete, {len(todo)} to run ({executor})")
 
-    try:
-        for i in todo:
-            log.write(f"{_now()} run {_key(campaign.tasks[i])}\n")
-        if todo and scheduler is None:
-            run_isolated(partial(run_fit, threads=threads), {i: campaign.tasks[i] for i in todo}, workers, finish)
-        elif todo:
-            _run_dask(campaign, todo, scheduler, workers, threads, finish)
-    finally:
-        log.write(f"{_now()} end\n")
-        log.close()
+        def finish(i, record=None, error=None):
+            task = campaign.tasks[i]
+            if error is None:
+                rows[i].update(record)
+                log.write(f"{_now()} done {_key(task)} {record['seconds']:.2f} s converged={record['converged']}\n")
+            else:
+                rows[i].update(status=f"failed: {error_line(error)}")
+                log.write(f"{_now()} failed {_key(task)}: {error_line(error)}\n")
+            _write_index(out, rows)
+            echo(f"  {rows[i]['status']:8s} {_key(task)}" + (f"  {rows[i]['seconds']:.1f} s, converged="
+                                                            f"{rows[i]['converged']}" if error is None else ""))
+
+        try:
+            for i in todo:
+                log.write(f"{_now()} run {_key(campaign.tasks[i])}\n")
+            if todo and scheduler is None:
+                run_isolated(partial(run_fit, threads=threads), {i: campaign.tasks[i] for i in todo}, workers, finish)
+            elif todo:
+                _run_dask(campaign, todo, scheduler, workers, threads, finish)
+        finally:
+            log.write(f"{_now()} end\n")
     return pd.DataFrame(rows, columns=_INDEX_COLUMNS)
 
 

@@ -41,12 +41,14 @@ __all__ = ["DEMO_OPTIONS", "demo_plan", "run_demo"]
 DEMO_OPTIONS = {
     # the electroadhesion paper fits one alpha per voltage; a shared alpha is the default and the demo keeps it
     "contact_area_synthetic": {"rows": {"subject": "S01"}, "by": "subject",
-                               "why": "Huloux, Willemet & Wiertlewski fit one subject at a time; the model on every subject "
+                               "why": "Huloux, Willemet & Wiertlewski fit one subject at a time; "
+                                      "the model on every subject "
                                       "(as --by subject) for the population and contrasts"},
     "wavy_synthetic": {"split": {"r": "wavelength", "s": "wavelength"},
                        "why": "Fujii, Okamoto & Yamada needed smaller contact parameters r, s at lambda = 20 mm"},
     "textured_synthetic": {"split": {"beta_h": "material"},
-                           "why": "the Biotribology 2019 paper varies the hysteresis fraction beta_h per silicone grade"},
+                           "why": "the Biotribology 2019 paper varies the hysteresis fraction beta_h per silicone "
+                                  "grade"},
 }
 
 
@@ -181,7 +183,7 @@ def run_demo(out="runs/demo", report="runs/demo/report", *, seed=1, jobs=None, d
     todo.sort(key=lambda t: -t[0]["n_rows"])  # larger fits first: the workers finish together
     echo(f"skinfit demo: {len(plan)} fits of {len({p['dataset'] for p in plan})} SIMULATED shipped "
          f"datasets ({len(plan) - len(todo)} already done under {out})")
-    for p, path, f in zip(plan, paths, reused):  # the demo's folder is its own: a fit of other settings is
+    for _p, path, f in zip(plan, paths, reused):  # the demo's folder is its own: a fit of other settings is
         if f is None and path.exists():             # replaced, and said so
             echo(f"  replacing {path}: not made with this demo's seed, cards, data and sampler settings")
     for p in plan:

@@ -297,8 +297,8 @@ def _pareto(log_lik, reff, n):
         _, k = da.azstats.psislw(r_eff=reff, dim=["chain", "draw"])
     k = np.asarray(k)
     bad = np.flatnonzero(k > PARETO_K)
-    return {"count": int(len(bad)), "rows": (rows[bad[np.argsort(-k[bad])]][:10] + 1).tolist(),
-            "max_k": float(np.max(k)), "threshold": PARETO_K, "rows_checked": int(len(rows)),
+    return {"count": len(bad), "rows": (rows[bad[np.argsort(-k[bad])]][:10] + 1).tolist(),
+            "max_k": float(np.max(k)), "threshold": PARETO_K, "rows_checked": len(rows),
             "warn": bool(len(bad) >= max(2, math.ceil(PARETO_SHARE * min(n, LOO_ROWS))))}
 
 

@@ -190,7 +190,7 @@ def _nlopt(algorithm, objective, w0, maxeval, xtol_rel, step, ftol_abs=1e-9):
     def guarded(w, grad):
         try:
             return objective(w, grad)
-        except BaseException as exc:  # noqa: BLE001 - kept, the search stopped, and raised again below
+        except BaseException as exc:  # kept, the search stopped, and raised again below
             raised.append(exc)
             opt.force_stop()
             return _PENALTY

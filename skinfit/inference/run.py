@@ -26,10 +26,24 @@ from skinfit.inference.checkpoint import Checkpoint, load_checkpoint, run_identi
 from skinfit.inference.guardrails import assess_run
 from skinfit.inference.optimize import MAPResult, find_map, laplace_covariance
 from skinfit.inference.proposal import MixtureT
-from skinfit.inference.sampling import (CHECK_EVERY, SamplerRun, importance_start, initial_ball, run_emcee,
-                                        sampler_settings)
-from skinfit.io.arguments import (as_generator, available_memory, check_count, check_flag, check_mapping,
-                                  check_memory, check_output_file, check_path)
+from skinfit.inference.sampling import (
+    CHECK_EVERY,
+    SamplerRun,
+    importance_start,
+    initial_ball,
+    run_emcee,
+    sampler_settings,
+)
+from skinfit.io.arguments import (
+    as_generator,
+    available_memory,
+    check_count,
+    check_flag,
+    check_mapping,
+    check_memory,
+    check_output_file,
+    check_path,
+)
 from skinfit.io.data import Dataset, as_dataset
 from skinfit.io.models import Model, load_model
 from skinfit.io.priors import PriorSet, load_priors
@@ -271,5 +285,6 @@ def pointwise_thinning(post, nwalkers, ndraws):
         which = f"one draw of every {_ordinal(walker_step)} walker"
     kept = len(range(0, nw, walker_step)) * len(range(0, nd, every))
     note = (f"pointwise log-likelihood and predictive draws on {which} ({kept} of {nw * nd}): all draws would "
-            f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory ({_size(budget / MEMORY_FRACTION)})")
+            f"need {_size(total)}, over {MEMORY_FRACTION:.0%} of the available memory "
+            f"({_size(budget / MEMORY_FRACTION)})")
     return every, walker_step, note

@@ -128,8 +128,9 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     Laplace approximation), the moves are independence Metropolis-Hastings from it mixed with
     differential evolution (:func:`adaptive_moves`), and the proposal is refitted to the chain
     (:func:`_adapt`) at step :data:`ADAPT_FIRST`, then at twice the previous refit's step for as
-    long as the run has not converged, unless it already mixes well (:func:`_apply_refit`).  Between refits the proposal is fixed: the chain from
-    the last refit on is a time-homogeneous Markov chain, and only it is judged and kept.  Without a proposal,
+    long as the run has not converged, unless it already mixes well (:func:`_apply_refit`).  Between
+    refits the proposal is fixed: the chain from the last refit on is a time-homogeneous Markov
+    chain, and only it is judged and kept.  Without a proposal,
     differential evolution and snooker moves alone (:func:`skinfit.inference.moves.default_moves`).
 
     Convergence is checked at step counts fixed by ``check_every`` and ``max_steps`` alone
@@ -174,7 +175,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         evaluated += len(z)
         try:
             return post(z)
-        except Exception as exc:  # noqa: BLE001 - emcee would print its traceback: kept, raised after the step
+        except Exception as exc:  # emcee would print its traceback: kept, raised after the step
             raised.append(exc)
             return np.full(len(z), -np.inf)
 
@@ -184,7 +185,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
     sampler = emcee.EnsembleSampler(nwalkers, d, log_prob, vectorize=True, moves=moves, backend=backend)
     n = backend.iteration
     history, start = [], 0  # refits so far; the chain is homogeneous from ``start`` on
-    next_adapt = ADAPT_FIRST if indep is not None and ADAPT_FIRST < max_steps else None
+    next_adapt = ADAPT_FIRST if indep is not None and max_steps > ADAPT_FIRST else None
     # resumed: replay the refits on the saved chain (one due at the saved step itself follows
     # that step's check, in the loop)
     while next_adapt is not None and next_adapt < n:
@@ -207,7 +208,8 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
         while True:
             target = min([c for c in checks if c >= n] + ([next_adapt] if next_adapt is not None else []))
             if target > n:
-                for state in sampler.sample(state, iterations=target - n):
+                for new_state in sampler.sample(state, iterations=target - n):
+                    state = new_state  # the last one is where the next stretch starts
                     if raised:
                         raise raised[0]
                     counts = tally()
@@ -259,7 +261,8 @@ def sampler_settings():
 
 def describe_moves():
     """The moves of :func:`adaptive_moves`, in words (stored with every fit)."""
-    return (f"skinfit.inference.moves.IndependenceMove (mixture of Student-t, refitted; {INDEPENDENCE_SUBSTEPS} updates "
+    return ("skinfit.inference.moves.IndependenceMove (mixture of Student-t, refitted; "
+            f"{INDEPENDENCE_SUBSTEPS} updates "
             f"a step) {INDEPENDENCE_WEIGHT:g} + "
             f"skinfit.inference.moves.DEMove {1 - INDEPENDENCE_WEIGHT:g}")
 
@@ -346,7 +349,7 @@ def importance_start(post, proposal, nwalkers, rng, *, size=IMPORTANCE_SIZE, rou
         informative += ess >= IMPORTANCE_MIN_ESS
         entry = {"draws": size, "ess": ess, "inside_support": int(finite.sum())}
         if informative:  # the weights say where the posterior is: population Monte Carlo
-            entry["refit"] = ess < IMPORTANCE_GOOD * size and IMPORTANCE_MIN_ESS <= ess and informative < rounds
+            entry["refit"] = ess < IMPORTANCE_GOOD * size and ess >= IMPORTANCE_MIN_ESS and informative < rounds
         else:  # degenerate so far: widen the proposal towards the posterior
             entry["refit"] = len(record) < tempered
             entry["beta"], w_beta = _tempered(log_w, finite, IMPORTANCE_MIN_ESS) if entry["refit"] else (None, None)

@@ -20,8 +20,8 @@ from urllib.parse import urlsplit
 
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from skinfit.inference.checkpoint import watch_parent
 from skinfit.errors import InputError, WorkerError, portable, require_optional
+from skinfit.inference.checkpoint import watch_parent
 
 __all__ = ["THREAD_VARIABLES", "SCHEMES", "check_scheduler", "worker_threads", "limited_threads",
            "thread_count", "run_isolated", "collect", "crossing", "forkable"]

@@ -68,7 +68,7 @@ def check_number(value, where, name, *, lo=0.0, lo_open=True, hi=math.inf, hi_op
 
 def check_flag(value, where, name):
     """True or False (or 1, 0); anything else, such as the string ``"no"`` (truthy), is refused."""
-    if not (isinstance(value, bool) or _numpy_bool(value) or _is_int(value) and value in (0, 1)):
+    if not (isinstance(value, bool) or _numpy_bool(value) or (_is_int(value) and value in (0, 1))):
         raise InputTypeError(where, f"expected True or False (got {shown(value)})", field=name)
     return bool(value)
 
@@ -77,7 +77,7 @@ def check_seed(rng, where, name="rng", *, recorded=False):
     """A seed numpy accepts (a whole number >= 0, below 2**63 when the result ``recorded`` it
     as a 64-bit integer), None or a numpy Generator, as given."""
     np = sys.modules.get("numpy")
-    if rng is None or np is not None and isinstance(rng, np.random.Generator):
+    if rng is None or (np is not None and isinstance(rng, np.random.Generator)):
         return rng
     if not _is_int(rng):
         raise InputTypeError(where, f"rng must be an int seed >= 0, None or numpy.random.Generator "

@@ -195,7 +195,8 @@ def read_campaign_file(path):
             if param not in model.parameter_names:
                 raise InputError(where, f"model {model.id!r} has no parameter {param!r} (parameters: "
                                  f"{', '.join(model.parameter_names)})", field=f"split.{name}.{param}")
-            if not (isinstance(cols, str) or (isinstance(cols, list) and cols and all(isinstance(c, str) for c in cols))):
+            if not (isinstance(cols, str)
+                    or (isinstance(cols, list) and cols and all(isinstance(c, str) for c in cols))):
                 raise InputError(where, f"expected a column name or a list of them (got {cols!r})",
                                  field=f"split.{name}.{param}")
         entries.append(CampaignModel(

@@ -26,11 +26,11 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from skinfit.io.toml import available, find_file, read_regular, read_toml, require
-from skinfit.io.arguments import check_path
 from skinfit.errors import InputError
+from skinfit.io.arguments import check_path
 from skinfit.io.models import Model, check_id, load_model
 from skinfit.io.paths import display
+from skinfit.io.toml import available, find_file, read_regular, read_toml, require
 from skinfit.io.units import NONNEGATIVE, parse_unit
 
 __all__ = ["Dataset", "load_dataset", "list_datasets", "from_frame", "as_dataset", "check_units", "write_card",

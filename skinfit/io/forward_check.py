@@ -18,8 +18,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from skinfit.io.arguments import shown
 from skinfit.errors import ForwardError
+from skinfit.io.arguments import shown
 
 __all__ = ["check_forward", "check_quantiles", "validated", "forward_error", "CHECK_DRAWS"]
 
@@ -43,7 +43,7 @@ def forward_error(model, what):
 def _call(model, params, x, constants, when):
     try:
         return model.forward(params, x, constants)
-    except Exception as exc:  # noqa: BLE001 - any exception of a plug-in's code is its bug, named here in one line
+    except Exception as exc:  # any exception of a plug-in's code is its bug, named here in one line
         raise forward_error(model, f"raised {type(exc).__name__}: {str(exc)[:200]} ({when})") from exc
 
 

@@ -25,13 +25,13 @@ from numpy.typing import ArrayLike
 if TYPE_CHECKING:  # pandas in annotations only: ``skinfit models`` does without it
     import pandas as pd
 
-from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError, InputTypeError, SupportWarning
 from skinfit.io.arguments import check_mapping, shown
 from skinfit.io.forward_check import forward_error, validated
 from skinfit.io.paths import display
 from skinfit.io.references import check_source
 from skinfit.io.registry import resolve
+from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.io.units import check_model_unit
 
 __all__ = ["Model", "Quantity", "load_model", "list_models", "parse_model_text", "resolve_forward", "check_id",
@@ -309,8 +309,8 @@ def resolve_split(model, split, dataset, where):
                  check_mapping(split, where, "split", "a mapping parameter -> column or list of columns"))
     out = {}
     for pname, cols in split.items():
-        if not (isinstance(cols, str) or isinstance(cols, (list, tuple))
-                and cols and all(isinstance(c, str) for c in cols)):
+        if not (isinstance(cols, str) or (isinstance(cols, (list, tuple))
+                and cols and all(isinstance(c, str) for c in cols))):
             raise InputTypeError(where, f"expected {pname} = a column name or a list of column names "
                                  f"(got {shown(cols)})", field="split")
         if pname not in model.parameter_names:
@@ -375,7 +375,7 @@ def parse_model_text(text, where, digest):
     if not model.observables:
         raise InputError(where, "a model needs at least one observable", field="observables")
     resolve("forward", model.forward_ref, where)
-    for pname, col in model.split.items():
+    for pname in model.split:
         if pname not in model.parameter_names:
             raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
     for pname in model.linear:

@@ -16,15 +16,15 @@ import hashlib
 import json
 import os
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 from importlib import metadata, resources
 from pathlib import Path
 
 import platformdirs
 
-from skinfit.io.arguments import check_path
 from skinfit.errors import InputError
 from skinfit.io import registry
+from skinfit.io.arguments import check_path
 
 __all__ = ["KINDS", "Entry", "Root", "entries", "locate", "search_path", "set_search_path", "explicit_search_path",
            "check_search_path", "where_from", "shipped_root", "user_root", "user_cache_root"]
@@ -202,7 +202,7 @@ def display(path: Path) -> str:
     return str(path)
 
 
-@lru_cache(maxsize=None)
+@cache
 def source_hash() -> str:
     """sha256 of skinfit's own source: every .py, template and card file of the package (the
     physics, the sampler, the plots). Computed once a process."""
@@ -222,7 +222,7 @@ def package_version(name: str) -> str:
         return "not installed"
 
 
-@lru_cache(maxsize=None)
+@cache
 def code_hash(libraries: tuple[str, ...] = ()) -> str:
     """sha256 of skinfit's source (:func:`source_hash`) and of the installed versions of
     ``libraries``: keys results kept by content (a report's figures, the population cache), so

@@ -16,11 +16,11 @@ from types import MappingProxyType
 
 import numpy as np
 
-from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.errors import InputError
 from skinfit.io.models import check_id
 from skinfit.io.paths import display
 from skinfit.io.references import check_source
+from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 
 __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "check_physical", "prior_groups",
            "DISTRIBUTIONS", "LOG_DENSITIES"]

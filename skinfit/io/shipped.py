@@ -30,5 +30,5 @@ def shipped_physics(model_id, model_sha256):
         if model.derived.get("function"):
             refs.append(("derived", model.derived["function"]))
         return all(resolve(role, ref, model.path).__module__.startswith("skinfit.physics.") for role, ref in refs)
-    except Exception:  # noqa: BLE001 - a model that cannot be checked is simply not shipped physics
+    except Exception:  # a model that cannot be checked is simply not shipped physics
         return False

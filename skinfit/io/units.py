@@ -153,7 +153,8 @@ def check_model_unit(text):
         return "expected a unit (\"1\" for a dimensionless quantity)"
     if _coherent(_POWER_NAME.sub("^1", text)) is None:
         return ("not a coherent SI unit (a model card states SI units: products of "
-                f"{', '.join(s for s in SYMBOLS if s not in ('1', '-', 'g'))} with integer powers, e.g. N*s/m, m^2/N^2)")
+                f"{', '.join(s for s in SYMBOLS if s not in ('1', '-', 'g'))} with integer powers, "
+                "e.g. N*s/m, m^2/N^2)")
     return None
 
 

@@ -1,4 +1,5 @@
-"""Real contact area and ultrasonic impedance of a fingertip pressing on glass (Huloux, Willemet & Wiertlewski; docs/models/contact_area.md).
+"""Real contact area and ultrasonic impedance of a fingertip pressing on glass (Huloux, Willemet &
+Wiertlewski; docs/models/contact_area.md).
 
 Two power laws of the normal force f per press (eqs. 3 and 4 of Huloux, Willemet & Wiertlewski)::
 

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._cache import by_value
+from skinfit.physics._cache import by_value
 
 __all__ = [
     "reduced_modulus",
@@ -30,7 +30,8 @@ _TEXTURE = ("asperity_radius", "asperity_height", "asperity_spacing")
 
 
 def reduced_modulus(E_skin, E_m, c):
-    """Reduced modulus ``1/((1-nu_skin**2)/E_skin + (1-nu_m**2)/E_m)`` [Pa] (the Biotribology 2019 paper, eqs. 3, 13)."""
+    """Reduced modulus ``1/((1-nu_skin**2)/E_skin + (1-nu_m**2)/E_m)`` [Pa] (the Biotribology 2019
+    paper, eqs. 3, 13)."""
     return _reduced(E_skin, _sample_compliance(E_m, c["nu_m"]), c)
 
 
@@ -131,7 +132,8 @@ def _terms(f, sample_modulus, r_asp, h, lam, nu_m):
     r_asp, h, lam = (np.where(m, 1.0, g) for m, g in zip(missing, (r_asp, h, lam)))  # harmless fill
     f_safe = np.where(f > 0, f, 1.0)
     lam2 = lam**2
-    return _Terms(f_safe, np.log(f_safe), flat, ok, np.asarray(flat.any()), (8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2,
+    return _Terms(f_safe, np.log(f_safe), flat, ok, np.asarray(flat.any()),
+                  (8.0 / 9.0) * np.sqrt(r_asp) * h**1.5 / lam2,
                   0.75 * lam2 * r_asp, np.pi / lam2, _sample_compliance(sample_modulus, nu_m))
 
 

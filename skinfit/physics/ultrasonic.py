@@ -37,7 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ._cache import by_value
+from skinfit.physics._cache import by_value
 
 __all__ = ["PHASES", "mu_equilibrium", "mu_speed", "period_average", "ultrasonic", "ultrasonic_projected",
            "ultrasonic_constant_mu", "mu_inf_offset"]

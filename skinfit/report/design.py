@@ -28,7 +28,8 @@ def design_section_html(result, figdir):
              "<h3>Plan vs baseline</h3>", result.comparison.to_html(float_format=lambda v: f"{v:.3g}"),
              "<h3>Predicted posterior sd</h3>", result.sd.to_html(float_format=lambda v: f"{v:.3g}")]
     if result.discrimination is not None:
-        parts += ["<h3>Discrimination</h3>", result.discrimination.to_html(index=False, float_format=lambda v: f"{v:.3g}")]
+        parts += ["<h3>Discrimination</h3>",
+                  result.discrimination.to_html(index=False, float_format=lambda v: f"{v:.3g}")]
     parts += ["<h3>Plan (user units)</h3>", result.plan.to_html(index=False, float_format=lambda v: f"{v:.4g}"),
               "</section>"]
     return "\n".join(parts)

@@ -16,10 +16,10 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from skinfit import plots
 from skinfit.inference.checkpoint import watch_parent
 from skinfit.inference.workers import forkable
 from skinfit.io.paths import code_hash
-from skinfit import plots
 from skinfit.report.figure_folder import SUFFIXES, FigureFolder
 
 __all__ = ["FIGURES", "MANY_FITS", "MAX_FIGURE_WORKERS", "fit_figure_jobs", "split_parameters", "job_keys",
@@ -147,7 +147,7 @@ def draw_figure(make, path):
     before = {s: _stat(Path(path).with_suffix(s)) for s in SUFFIXES}
     try:
         plots.write_figure_files(make(), path)
-    except Exception as exc:  # noqa: BLE001 - reported, not swallowed
+    except Exception as exc:  # reported, not swallowed
         for s, stat in before.items():  # a file half-written now is no figure; one not touched stays
             if _stat(Path(path).with_suffix(s)) != stat:
                 Path(path).with_suffix(s).unlink(missing_ok=True)

@@ -20,16 +20,16 @@ import pandas as pd
 
 from skinfit.analysis.contrasts import fit_contrasts, level_contrasts
 from skinfit.analysis.population.inputs import subject_digest
-from skinfit.analysis.population.result import DERIVED
 from skinfit.analysis.population.population import population as fit_population
+from skinfit.analysis.population.result import DERIVED
 from skinfit.errors import InputError
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
 from skinfit.report.tables import cells, file_part, not_applicable, unique_name
 from skinfit.results.run_labels import run_labels
 
-__all__ = ["subject_label", "row_labels", "PopulationView", "subjects_section", "population_section", "contrast_section",
-           "population_parameters", "group_analyses", "hyperprior_table", "sampler_text", "population_for",
-           "across_fits"]
+__all__ = ["subject_label", "row_labels", "PopulationView", "subjects_section", "population_section",
+           "contrast_section", "population_parameters", "group_analyses", "hyperprior_table", "sampler_text",
+           "population_for", "across_fits"]
 
 
 def subject_label(fit):
@@ -344,7 +344,7 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
             table = pd.concat(rows, ignore_index=True)
             table.attrs[NOT_CONVERGED_ATTR] = [label for label, f in group.items() if not f.converged]
             contrasts[f"{model_id} on {base}: between subjects"] = table
-    for (key, f), label in zip(fits.items(), run_labels(fits.values())):  # two split fits: each its own table
+    for (_key, f), label in zip(fits.items(), run_labels(fits.values())):  # two split fits: each its own table
         split = {s["base"] for s in f.attr("slots") if s["level"] is not None}
         rows = [level_contrasts(f, name).assign(parameter=name) for name in sorted(split)]
         if rows:

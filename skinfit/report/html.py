@@ -27,20 +27,36 @@ from markupsafe import Markup
 
 from skinfit import __version__
 from skinfit.analysis.design import load_design
-from skinfit.report.design import design_section_html
 from skinfit.analysis.groups import data_drift
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import CheckpointLock
 from skinfit.io.labels import derived_units, parameter_units
 from skinfit.io.paths import package_version
 from skinfit.io.references import cite_long
-from skinfit.report.checks import (checked_text, comparison_issues, contrast_issues, design_issues, fit_diagnostics,
-                                   section_issues)
+from skinfit.report.checks import (
+    checked_text,
+    comparison_issues,
+    contrast_issues,
+    design_issues,
+    fit_diagnostics,
+    section_issues,
+)
+from skinfit.report.design import design_section_html
 from skinfit.report.figures import fit_figure_jobs, render_figures
 from skinfit.report.groups import across_fits, contrast_section, group_analyses
 from skinfit.report.runs import collect_runs, comparison_tables, saved_populations
-from skinfit.report.tables import (base_name, break_at_underscores, cells, defang, file_part, level_names, markdown,
-                                   not_applicable, ranking_note, unique_name)
+from skinfit.report.tables import (
+    base_name,
+    break_at_underscores,
+    cells,
+    defang,
+    file_part,
+    level_names,
+    markdown,
+    not_applicable,
+    ranking_note,
+    unique_name,
+)
 from skinfit.results.fit import as_fit, load_fit
 from skinfit.results.run_labels import run_labels
 

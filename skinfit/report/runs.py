@@ -60,7 +60,7 @@ def saved_populations(paths):
         if p.is_file():
             try:
                 out.append(load_population(p))
-            except Exception as exc:  # noqa: BLE001 - a damaged file is reported; the report computes its own
+            except Exception as exc:  # a damaged file is reported; the report computes its own
                 print(f"skinfit report: warning: {p} could not be read ({type(exc).__name__}: {exc}): not used",
                       file=sys.stderr)
     return out

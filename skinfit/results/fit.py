@@ -32,8 +32,16 @@ from skinfit.io.priors import PriorSet
 from skinfit.io.provenance import input_lines, inputs_of
 from skinfit.posterior import Posterior
 from skinfit.results.store import fit_file, read_tree, write_tree
-from skinfit.results.summary import (SUMMARY_ATTR, SUMMARY_FORMAT, compute_summary, misfit_line, priors_from_attrs,
-                                     summary_from_attr, summary_to_attr, wall_time_text)
+from skinfit.results.summary import (
+    SUMMARY_ATTR,
+    SUMMARY_FORMAT,
+    compute_summary,
+    misfit_line,
+    priors_from_attrs,
+    summary_from_attr,
+    summary_to_attr,
+    wall_time_text,
+)
 
 __all__ = ["Fit", "load_fit", "as_fit", "as_fits", "rebuild_posterior", "plain_json", "GROUPS", "DEFERRED",
            "CACHED_ATTRS"]
@@ -210,7 +218,8 @@ class Fit:
         table = summary_from_attr(self._tree.attrs.get(SUMMARY_ATTR), key, self._slot_names())
         if table is None:
             table = self._compute_summary()
-        table.attrs["warnings"] = self.warnings  # guard rails and misfit (skinfit.inference.guardrails, skinfit.inference.misfit)
+        # guard rails and misfit (skinfit.inference.guardrails, skinfit.inference.misfit)
+        table.attrs["warnings"] = self.warnings
         table.attrs["notes"] = self.notes  # information, not failures (skinfit.inference.guardrails)
         self._summary = (key, table)
         return table.copy()
@@ -273,7 +282,8 @@ class Fit:
         c = self.attr("support_counts")
         seed = int(self.attrs.get("seed", -1))
         seed_text = ("a numpy Generator (not recorded)" if seed < 0 else
-                     f"{seed}{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
+                     f"{seed}"
+                     f"{' (drawn; --seed ' + str(seed) + ' repeats this fit)' if self.attrs.get('seed_drawn') else ''}")
         lines = [f"model {self.model_id}  data {self.dataset_id}  ({self.attrs['dataset_sha256'][:12]})",
                  *input_lines(self.attrs),
                  f"seed: {seed_text}",
@@ -289,7 +299,8 @@ class Fit:
                  "proposal: importance start, effective sample size "
                  + (", ".join(f"{r['ess']:.0f}" for r in s.get("importance", [])) or "-")
                  + f" of {s['importance'][0]['draws'] if s.get('importance') else 0} draws per round; refitted "
-                 f"during sampling at steps {', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
+                 "during sampling at steps "
+                 f"{', '.join(str(a['step']) for a in s.get('adaptation', []) if a['refit']) or 'none'}",
                  f"wall time: {wall_time_text(t, self.pending)}",
                  f"log-density evaluations {c['evaluations']}: outside prior bounds {c['outside_prior']}, "
                  f"outside the physical support {c['outside_support']}"
@@ -313,7 +324,7 @@ class Fit:
             tree.attrs[integrity.SCHEMA_ATTR] = integrity.CHECKED_SCHEMA  # (before its summary's key is computed)
         try:
             tree.attrs[SUMMARY_ATTR] = summary_to_attr(self.summary(), self._summary_key())
-        except Exception as exc:  # noqa: BLE001 - the summary is only kept to save time: the fit is saved without it
+        except Exception as exc:  # the summary is only kept to save time: the fit is saved without it
             tree.attrs.pop(SUMMARY_ATTR, None)
             warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
                           f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)

@@ -51,7 +51,7 @@ def run_labels(fits, *, names=None, number_identical=True):
         keys = list(dict.fromkeys(k for o in options for k in o))
         options = [{k: o.get(k, "none") for k in keys} for o in options]
         differ = [k for k in keys if len({o[k] for o in options}) > 1]
-        for n, (i, o) in enumerate(zip(members, options)):
+        for i, o in zip(members, options):
             if differ:
                 shown = [f"{k} {o[k].split(' (')[0]}" if k == "priors" and len({p['priors'].split(' (')[0]
                                                                                    for p in options}) > 1

@@ -130,7 +130,7 @@ def slot_values(posterior, slot):
     ``base``, ``level``); a split parameter's slot selects its level."""
     da = posterior[slot["base"]]
     if slot["level"] is not None:
-        dim = [d for d in da.dims if d not in ("chain", "draw")][0]
+        dim = next(d for d in da.dims if d not in ("chain", "draw"))
         da = da.sel({dim: slot["level"]})
     return da.values.ravel()
 
@@ -169,7 +169,8 @@ def wall_time_text(timings, pending=False):
     t = timings
     if t.get("resumed"):
         text = (f"resumed from a checkpoint (MAP {t['map_s']:.2f} s in the first run), sampling "
-                f"{t['sampling_s']:.2f} s over all runs, result tree {t['tree_s']:.2f} s, this call {t['total_s']:.2f} s")
+                f"{t['sampling_s']:.2f} s over all runs, result tree {t['tree_s']:.2f} s, "
+                f"this call {t['total_s']:.2f} s")
     else:
         text = (f"MAP {t['map_s']:.2f} s, importance start {t['start_s'] - t['map_s']:.2f} s, "
                 f"sampling {t['sampling_s']:.2f} s, result tree {t['tree_s']:.2f} s, total {t['total_s']:.2f} s")

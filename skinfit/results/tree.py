@@ -68,7 +68,8 @@ def build_tree(result, n_prior_draws):
     for c in post.dataset.frame.columns:
         if c not in constant and c not in post.observables:
             col = post.dataset.frame[c]
-            constant[c] = col.to_numpy(dtype=object if col.dtype == object or str(col.dtype).startswith("str") else float)
+            constant[c] = col.to_numpy(
+                dtype=object if col.dtype == object or str(col.dtype).startswith("str") else float)
     for c in constant:
         dims[c] = ["obs_id"]
     ds = post.dataset

@@ -9,11 +9,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from skinfit.analysis.design.problem import n_candidates, take_x
 from skinfit.analysis.sbc import design_dataset
 from skinfit.errors import InputError
 from skinfit.io.data import load_dataset
 from skinfit.io.models import Model
-from skinfit.analysis.design.problem import n_candidates, take_x
 
 __all__ = ["baseline_design", "MIN_DRAWS", "MAX_BYTES", "MAX_SECONDS", "check_counts", "check_params",
            "check_discriminate", "check_noise_scale", "check_cost"]

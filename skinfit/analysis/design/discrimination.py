@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 from scipy import special
 
-from skinfit.analysis.design.problem import CELLS, LOG_2PI, log_lik, log_sum_lik, n_candidates, noise_draws, take_x
 from skinfit.analysis.design.laplace import fisher_factors
+from skinfit.analysis.design.problem import CELLS, LOG_2PI, log_lik, log_sum_lik, n_candidates, noise_draws, take_x
 
 __all__ = ["discrimination_plan"]
 

@@ -9,9 +9,9 @@ from dataclasses import replace
 import numpy as np
 from scipy import stats
 
+from skinfit.analysis.design.problem import DesignProblem, n_candidates
 from skinfit.errors import InputError
 from skinfit.io.labels import noise_suffix
-from skinfit.analysis.design.problem import DesignProblem, n_candidates
 
 __all__ = ["to_u", "log_coordinates", "model_problem", "prior_problem", "fit_density", "gaussian_density",
            "noise_setup"]
@@ -107,7 +107,8 @@ def gaussian_density(loc, cov):
 
     def log_marginal(u, idx):
         idx = np.atleast_1d(idx)
-        return np.atleast_1d(stats.multivariate_normal(loc[idx], cov[np.ix_(idx, idx)]).logpdf(np.atleast_2d(u)[:, idx]))
+        return np.atleast_1d(
+            stats.multivariate_normal(loc[idx], cov[np.ix_(idx, idx)]).logpdf(np.atleast_2d(u)[:, idx]))
 
     return (lambda u: np.atleast_1d(dist.logpdf(u))), log_marginal
 

@@ -8,8 +8,15 @@ import math
 import numpy as np
 from scipy import special
 
-from skinfit.analysis.design.problem import (CELLS, conditional_gain, log_lik, log_sum_lik, n_candidates, noise_draws,
-                                             take_x)
+from skinfit.analysis.design.problem import (
+    CELLS,
+    conditional_gain,
+    log_lik,
+    log_sum_lik,
+    n_candidates,
+    noise_draws,
+    take_x,
+)
 
 __all__ = ["eig_nmc"]
 

@@ -11,23 +11,36 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
+from skinfit.analysis.design.candidates import read_candidates, si_candidates
+from skinfit.analysis.design.checks import (
+    baseline_design,
+    check_cost,
+    check_counts,
+    check_discriminate,
+    check_noise_scale,
+    check_params,
+)
+from skinfit.analysis.design.discrimination import discrimination_plan
+from skinfit.analysis.design.laplace import batch_eig, fisher_factors, greedy_plan, laplace_design, laplace_gains
+from skinfit.analysis.design.model_problem import (
+    fit_density,
+    gaussian_density,
+    log_coordinates,
+    model_problem,
+    noise_setup,
+    prior_problem,
+    to_u,
+)
+from skinfit.analysis.design.nested import eig_nmc
+from skinfit.analysis.design.problem import n_candidates, restrict_to_support, take_x
+from skinfit.analysis.design.result import DesignResult, user_frame
 from skinfit.analysis.evidence import posterior_draws
 from skinfit.errors import InputError, InputTypeError
+from skinfit.io.arguments import as_generator
 from skinfit.io.labels import noise_suffix
 from skinfit.io.models import Model, load_model
 from skinfit.io.priors import load_priors
-from skinfit.io.arguments import as_generator
 from skinfit.results.fit import Fit
-from skinfit.analysis.design.problem import n_candidates, restrict_to_support, take_x
-from skinfit.analysis.design.nested import eig_nmc
-from skinfit.analysis.design.laplace import batch_eig, fisher_factors, greedy_plan, laplace_design, laplace_gains
-from skinfit.analysis.design.discrimination import discrimination_plan
-from skinfit.analysis.design.candidates import read_candidates, si_candidates
-from skinfit.analysis.design.model_problem import (fit_density, gaussian_density, log_coordinates, model_problem,
-                                                   noise_setup, prior_problem, to_u)
-from skinfit.analysis.design.result import DesignResult, user_frame
-from skinfit.analysis.design.checks import (baseline_design, check_cost, check_counts, check_discriminate,
-                                            check_noise_scale, check_params)
 
 __all__ = ["design"]
 
@@ -95,7 +108,8 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     if baseline is not None and not isinstance(baseline, (str, os.PathLike)):
         raise InputError("--baseline", f"expected a dataset id or path (got {type(baseline).__name__})")
     targets = list(names) if params is None else params
-    if isinstance(candidates, (str, os.PathLike)) or isinstance(candidates, dict) and {"grid", "points"} & set(candidates):
+    if isinstance(candidates, (str, os.PathLike)) or (
+            isinstance(candidates, dict) and {"grid", "points"} & set(candidates)):
         X, units = read_candidates(candidates, model)
     elif isinstance(candidates, (pd.DataFrame, Mapping)):
         X, units = si_candidates(candidates, model)

@@ -84,7 +84,8 @@ def gaussian_problem(names, mean, sigma, loc, cov, draws, *, nu=None, observable
         return np.atleast_1d(stats.multivariate_normal(loc[idx], cov[np.ix_(idx, idx)]).logpdf(u[..., idx]))
 
     sigma = np.atleast_1d(np.asarray(sigma, float))
-    return DesignProblem(tuple(names), mean, sigma, np.full(len(sigma), np.inf) if nu is None else np.asarray(nu, float),
+    return DesignProblem(tuple(names), mean, sigma,
+                         np.full(len(sigma), np.inf) if nu is None else np.asarray(nu, float),
                          np.asarray(draws, float), loc, cov, lambda u: np.atleast_1d(dist.logpdf(u)), log_marginal,
                          tuple(observables))
 
@@ -96,7 +97,8 @@ def log_lik(y, mu, sigma, nu):
     if np.all(np.isinf(nu)):
         ll = -0.5 * z * z - np.log(sigma) - 0.5 * LOG_2PI
     else:
-        ll = np.where(np.isinf(nu), stats.norm.logpdf(z), stats.t.logpdf(z, np.where(np.isinf(nu), 1.0, nu))) - np.log(sigma)
+        ll = (np.where(np.isinf(nu), stats.norm.logpdf(z), stats.t.logpdf(z, np.where(np.isinf(nu), 1.0, nu)))
+              - np.log(sigma))
     return np.where(np.isnan(ll), -np.inf, ll).sum(axis=-1)
 
 

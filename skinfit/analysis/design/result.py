@@ -92,7 +92,8 @@ class DesignResult:
 
 
 def user_frame(X, units, idx, covariates):
-    return pd.DataFrame({f"{c} [{units[c]}]": np.asarray(X[c])[idx] / to_si(units[c]) for c in covariates if c in units})
+    return pd.DataFrame({f"{c} [{units[c]}]": np.asarray(X[c])[idx] / to_si(units[c])
+                         for c in covariates if c in units})
 
 
 def load_design(out):

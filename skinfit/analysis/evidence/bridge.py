@@ -85,7 +85,7 @@ def _bridge_once(log_target, samples, rng, ess_fraction, tol, max_iter):
         den = logsumexp(-np.logaddexp(log_s1 + l1, log_s2 + log_r)) - math.log(n1)
         new = float(num - den)
         if abs(new - log_r) < tol:
-            log_r = new
+            log_r, iterations = new, iteration
             break
         log_r = new
     else:
@@ -95,7 +95,7 @@ def _bridge_once(log_target, samples, rng, ess_fraction, tol, max_iter):
     f1 = np.exp(l2 - log_r - np.logaddexp(log_s1 + l2 - log_r, log_s2))  # at proposal draws
     f2 = np.exp(-np.logaddexp(log_s1 + l1 - log_r, log_s2))              # at posterior draws
     re2 = np.var(f1, ddof=1) / np.mean(f1) ** 2 / n2 + np.var(f2, ddof=1) / np.mean(f2) ** 2 / n1_eff
-    return {"log_z": log_r, "re2": float(re2), "iterations": iteration, "n_evals": n1 + n2, "n2": n2,
+    return {"log_z": log_r, "re2": float(re2), "iterations": iterations, "n_evals": n1 + n2, "n2": n2,
             "n_fit": len(fit_half)}
 
 

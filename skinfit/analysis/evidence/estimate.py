@@ -15,14 +15,13 @@ import time
 
 import numpy as np
 
-from skinfit.errors import InputError
-from skinfit.io.arguments import check_count, check_flag, check_seed
-from skinfit.io.arguments import as_generator
-from skinfit.results.fit import Fit, as_fit
-from skinfit.analysis.evidence.log_evidence import LogEvidence
 from skinfit.analysis.evidence.bridge import bridge_sampling
 from skinfit.analysis.evidence.laplace import LaplaceError, laplace
+from skinfit.analysis.evidence.log_evidence import LogEvidence
 from skinfit.analysis.evidence.nested import nested
+from skinfit.errors import InputError
+from skinfit.io.arguments import as_generator, check_count, check_flag, check_seed
+from skinfit.results.fit import Fit, as_fit
 
 __all__ = ["evidence", "posterior_draws", "METHODS"]
 
@@ -45,7 +44,7 @@ def posterior_draws(fit):
     for slot in post.slots:
         da = ds[slot.base]
         if slot.level is not None:
-            dim = [d for d in da.dims if d not in ("chain", "draw")][0]
+            dim = next(d for d in da.dims if d not in ("chain", "draw"))
             da = da.sel({dim: slot.level})
         cols.append(da.values.reshape(-1))
     return np.column_stack(cols)

@@ -8,8 +8,8 @@ import time
 import numpy as np
 from scipy import special, stats
 
-from skinfit.analysis.evidence.log_evidence import LogEvidence
 from skinfit.analysis.evidence.bridge import mvn_logpdf
+from skinfit.analysis.evidence.log_evidence import LogEvidence
 
 __all__ = ["LaplaceError", "laplace"]
 
@@ -133,7 +133,8 @@ def laplace(log_target, start, *, lower=None, upper=None, draws=None, ess=None, 
         slack_low, slack_high = 3 * check["elbo_se"] + 0.02, 3 * check["eubo_se"] + 0.02
         if not (low - slack_low <= log_z <= high + slack_high):
             raise LaplaceError(f"Laplace: its Gaussian does not describe this posterior: the posterior draws "
-                               f"bound log Z within [{low:.2f}, {high:.2f}], the Laplace value {log_z:.2f} lies outside")
+                               f"bound log Z within [{low:.2f}, {high:.2f}], the Laplace value {log_z:.2f} "
+                               "lies outside")
         caveats.append(f"the posterior draws bound log Z within [{low:.2f}, {high:.2f}]")
     else:
         caveats.append("not checked against posterior draws")

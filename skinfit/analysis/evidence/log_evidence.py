@@ -3,8 +3,6 @@
 import math
 from dataclasses import dataclass, field
 
-
-
 __all__ = ["LogEvidence", "bayes_factor_strength"]
 
 

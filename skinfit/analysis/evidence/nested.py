@@ -5,8 +5,8 @@ import time
 
 import numpy as np
 
-from skinfit.errors import require_optional
 from skinfit.analysis.evidence.log_evidence import LogEvidence
+from skinfit.errors import require_optional
 
 __all__ = ["nested"]
 

@@ -7,15 +7,14 @@ import hashlib
 import io
 import json
 import zipfile
-from pathlib import Path
 
 import numpy as np
 
+from skinfit.analysis.population.result import PopulationResult
 from skinfit.inference.checkpoint import replace_atomic
 from skinfit.io.paths import code_hash
 from skinfit.io.shipped import shipped_physics
 from skinfit.results.fit import plain_json
-from skinfit.analysis.population.result import PopulationResult
 
 __all__ = ["cacheable", "cache_key", "write_cache", "read_cache"]
 

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from skinfit.errors import InputError
 from skinfit.analysis.groups import data_drift
+from skinfit.errors import InputError
 
 __all__ = ["check_arguments", "check_prob", "check_size", "check_subjects", "undetermined", "not_converged", "FAMILIES",
            "MAX_DRAW_BYTES"]
@@ -97,10 +97,10 @@ def check_arguments(parameters, family, correlated, method, rng, model, chains, 
         raise InputError("population", f"expected True or False (got {correlated!r})", field="correlated")
     if method not in ("gibbs", "reweight"):
         raise InputError("population", f"unknown method {method!r} (expected gibbs or reweight)", field="method")
-    if not (rng is None or isinstance(rng, np.random.Generator)):
-        if isinstance(rng, bool) or not isinstance(rng, numbers.Integral) or rng < 0:
-            raise InputError("population", f"expected a seed (an integer >= 0), None or a numpy Generator "
-                             f"(got {rng!r})", field="rng")
+    if not (rng is None or isinstance(rng, np.random.Generator)) and (
+            isinstance(rng, bool) or not isinstance(rng, numbers.Integral) or rng < 0):
+        raise InputError("population", f"expected a seed (an integer >= 0), None or a numpy Generator "
+                         f"(got {rng!r})", field="rng")
     if model is not None and (not isinstance(model, str) or not model):
         raise InputError("population", f"expected a model id (got {model!r})", field="model")
     _int(chains, "chains", 2, 1000)
@@ -243,6 +243,6 @@ def not_converged(result, targets, min_contraction, seconds):
 
 def _round_up(n):
     """n rounded up to two significant digits."""
-    n = max(int(math.ceil(n)), 1)
+    n = max(math.ceil(n), 1)
     q = 10 ** max(len(str(n)) - 2, 0)
     return int(math.ceil(n / q) * q)

@@ -14,9 +14,9 @@ import numpy as np
 import xarray as xr
 
 from skinfit.analysis.groups import index_document, index_drift, listed_problem, missing_groups, read_index, reading
+from skinfit.analysis.population.result import PopulationWarning
 from skinfit.errors import InputError
 from skinfit.results.fit import Fit, load_fit
-from skinfit.analysis.population.result import PopulationWarning
 
 __all__ = ["load_run", "DrawsFit", "subject_fits", "subject_digest"]
 

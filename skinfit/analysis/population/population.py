@@ -42,16 +42,16 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from skinfit.analysis.population.cache import cache_key, cacheable, read_cache, write_cache
 from skinfit.analysis.population.checks import FAMILIES, check_arguments, check_size, check_subjects, not_converged
 from skinfit.analysis.population.hierarchical import NU_HYPER, NU_T, Spec, run_gibbs
+from skinfit.analysis.population.inputs import subject_digest, subject_fits
+from skinfit.analysis.population.result import WEAK_DATA, PopulationResult, PopulationWarning
+from skinfit.analysis.population.reweight import reweight
 from skinfit.errors import InputError
 from skinfit.io.arguments import as_generator
 from skinfit.results.fit import Fit
 from skinfit.results.summary import priors_from_attrs, slot_values
-from skinfit.analysis.population.result import PopulationResult, PopulationWarning, WEAK_DATA
-from skinfit.analysis.population.inputs import subject_digest, subject_fits
-from skinfit.analysis.population.cache import cache_key, cacheable, read_cache, write_cache
-from skinfit.analysis.population.reweight import reweight
 
 __all__ = ["population", "population_tables", "BURN"]
 
@@ -149,7 +149,8 @@ def population(fits: Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike, para
         its inputs: every subject's label and fit content (:meth:`~skinfit.results.fit.Fit.content_hash`),
         the arguments above, the seed (an int ``rng`` only) and the code of skinfit and the
         versions of numpy and scipy; used only for fits of shipped, unchanged model cards (a
-        user's own forward function may change without the fits changing).  A call with the same inputs reads the same result from
+        user's own forward function may change without the fits changing).  A call with the same
+        inputs reads the same result from
         it instead of sampling (its warnings are warned again); other inputs, or an unreadable
         file, sample and rewrite it.
 

@@ -269,7 +269,8 @@ class PopulationResult:
             post["corr"] = self.corr
             dims["corr"] = ["parameter", "parameter_b"]
         coords = {"parameter": self.parameters, "parameter_b": self.parameters, "subject": self.subjects}
-        attrs = {"kind": "skinfit.population", integrity.SCHEMA_ATTR: integrity.CHECKED_SCHEMA, "model_id": self.model_id,
+        attrs = {"kind": "skinfit.population", integrity.SCHEMA_ATTR: integrity.CHECKED_SCHEMA,
+                 "model_id": self.model_id,
                  "families": json.dumps(dict(zip(self.parameters, self.families))),
                  # not "coordinates": netCDF readers take that for CF's list of coordinate variables and drop it
                  "population_coordinates": json.dumps(dict(zip(self.parameters, self.coordinates))),

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from skinfit.analysis.population.hierarchical import NU_HYPER

@@ -7,6 +7,7 @@ command's module is imported only when that command runs, so that ``skinfit --he
 """
 
 import argparse
+import contextlib
 import importlib
 import os
 import sys
@@ -105,7 +106,8 @@ def build_parser():
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each card is from")
     s.set_defaults(func=_command("skinfit.apps.cli.models"))
-    s = sub.add_parser("priors", help="show a model's priors with their literature sources (no MODEL: list prior files)")
+    s = sub.add_parser("priors", help="show a model's priors with their literature sources "
+                                      "(no MODEL: list prior files)")
     s.add_argument("model", nargs="?", help="model id or path of a prior file")
     s.add_argument("--json", action="store_true")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each file is from")
@@ -148,7 +150,8 @@ def build_parser():
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=_command("skinfit.apps.cli.compare"))
     s = sub.add_parser("report", help="write a self-contained static HTML report of fits")
-    s.add_argument("runs", nargs="+", help="run directories or fit.nc files, and folders written by `skinfit design --out` "
+    s.add_argument("runs", nargs="+", help="run directories or fit.nc files, and folders written by "
+                   "`skinfit design --out` "
                    "(a section each); a run's population saved by `skinfit population RUN` is shown when made from "
                    "the same fits (else one is computed with the defaults, and the report says so)")
     s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
@@ -265,10 +268,8 @@ def _remove_empty(folder):
         return
     subs = [p for p in folder.rglob("*") if p.is_dir() and not p.is_symlink()]
     for sub in sorted(subs, key=lambda p: len(p.parts), reverse=True) + [folder]:
-        try:
+        with contextlib.suppress(OSError):
             sub.rmdir()  # only an empty folder goes: a file written meanwhile keeps its folder
-        except OSError:
-            pass
 
 
 def _run(args):

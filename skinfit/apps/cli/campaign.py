@@ -27,7 +27,8 @@ def run(args):
                           "fits": json.loads(table.to_json(orient="records"))}, indent=2))
         return 1 if failed.any() else 0
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.max_colwidth", 60):
-        print(table.drop(columns=["path", "worker", "threads", "dataset_path", "dataset_sha256"]).to_string(index=False))
+        print(table.drop(columns=["path", "worker", "threads", "dataset_path", "dataset_sha256"])
+              .to_string(index=False))
     unconverged = sum(c is False for c in table["converged"])
     print(f"\n{int((~failed).sum())} of {len(table)} fits complete ({unconverged} not converged), "
           f"{int(failed.sum())} failed; index: {campaign.out / 'index.csv'}  ({time.perf_counter() - t0:.1f} s)")

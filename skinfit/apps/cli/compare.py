@@ -26,7 +26,8 @@ def run(args):
             record["caveat"] = caveats.get(record["model"], "")
         print(json.dumps(records, indent=2))
     else:
-        with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
+        with pd.option_context("display.width", 200, "display.max_columns", 20,
+                               "display.float_format", "{:.4g}".format):
             print(table.to_string())
         print("\nlog Z: natural-log evidence +- standard error; log_bf_vs_best = ln(Z/Z_best); "
               "strength on 2 ln BF (Kass & Raftery 1995); elpd_loo: PSIS-LOO (ArviZ)")

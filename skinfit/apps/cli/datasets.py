@@ -10,7 +10,7 @@ __all__ = ["run"]
 
 def run(args):
     rows = []
-    for did, entry in search_entries("datasets", args).items():
+    for _did, entry in search_entries("datasets", args).items():
         ds = load_dataset(str(entry.path.parent))
         rows.append({"id": ds.id, **origin(entry), "title": ds.title, "rows": len(ds), "model": ds.model,
                      "provenance": ds.provenance.get("kind"), "groups": list(ds.groups),

@@ -9,8 +9,8 @@ from pathlib import Path
 from skinfit.analysis.groups import check_out_dir, fit_by, read_inputs
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import CheckpointLock
-from skinfit.io.data import load_dataset, write_card
 from skinfit.inference.run import resolve_inputs
+from skinfit.io.data import load_dataset, write_card
 from skinfit.results.fitting import fit
 
 __all__ = ["run"]

@@ -11,7 +11,7 @@ __all__ = ["run"]
 
 def run(args):
     rows = []
-    for mid, entry in search_entries("models", args).items():
+    for _mid, entry in search_entries("models", args).items():
         m = load_model(str(entry.path))
         rows.append({"id": m.id, **origin(entry), "title": m.title, "source": m.source, "cited": cite(m.source),
                      "observables": [f"{o.name} [{o.unit}]" for o in m.observables],

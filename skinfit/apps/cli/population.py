@@ -1,6 +1,7 @@
 """``skinfit population RUN``: the population distribution over the per-subject fits of a
 ``skinfit fit --by`` run or a campaign (:func:`skinfit.analysis.population.population.population`)."""
 
+import contextlib
 import sys
 import time
 import warnings
@@ -92,10 +93,9 @@ def run(args):
         if made:  # a folder this command made holds at most its lock and an empty cache folder: nothing left
             (out / ".checkpoint.h5.lock").unlink(missing_ok=True)
             for folder in (out / ".cache", *made):
-                try:
+                # not empty (another writer's files) or already gone: left as it is
+                with contextlib.suppress(OSError):
                     folder.rmdir()
-                except OSError:  # not empty (another writer's files) or already gone: left as it is
-                    pass
         raise
     s = result.sampler
     lines = [f"population of {len(result.subjects)} subjects ({result.model_id}), method {s['method']}, "
@@ -105,7 +105,8 @@ def run(args):
              "hyper-priors (from the prior file): " + "; ".join(f"{p}: mu ~ {h['mu']}, sd ~ {h['sd']}"
                                                                for p, h in result.hyperpriors.items()
                                                                if not p.startswith("_")),
-             f"converged: {'yes' if result.converged and not any('not converged' in w for w in result.warnings) else 'NO'}"
+             "converged: "
+             f"{'yes' if result.converged and not any('not converged' in w for w in result.warnings) else 'NO'}"
              f"  (max R-hat {s['rhat_max']:.4f}, min ESS {s['ess_min']:.0f}"
              + (f", {s['sweeps']} sweeps of {s['chains']} chains" if "sweeps" in s else "") + ")",
              *[f"{'WARNING' if w in result.problems else 'NOTE'}: {w}" for w in result.warnings], ""]

@@ -28,7 +28,8 @@ def run(args):
         units = {p.name: p.unit for p in m.parameters}
     except InputError:
         pass
-    noise_unit = {n: "1 (Student-t degrees of freedom)" if n == "nu" or n.startswith("nu_") else "(noise, observable's unit)"
+    noise_unit = {n: "1 (Student-t degrees of freedom)" if n == "nu" or n.startswith("nu_")
+                  else "(noise, observable's unit)"
                   for n in priors.priors}
     rows = [{"parameter": n, "unit": units.get(n, noise_unit[n]), "prior": p.describe(),
              "source": p.source, "cited": cite(p.source)} for n, p in priors.priors.items()]
