@@ -73,8 +73,8 @@ def test_unknown_unit(ds_dir):
 
 def test_unit_of_the_wrong_dimension_for_the_cards_model(ds_dir):
     card = (ds_dir / "dataset.toml").read_text()
-    (ds_dir / "dataset.toml").write_text(card.replace('unit = "mN"', 'unit = "grams"', 1))
-    with pytest.raises(skinfit.InputError, match=r"dataset.toml: column 'normal_force': unit 'grams' is a "
+    (ds_dir / "dataset.toml").write_text(card.replace('unit = "mN"', 'unit = "g"', 1))
+    with pytest.raises(skinfit.InputError, match=r"dataset.toml: column 'normal_force': unit 'g' is a "
                        r"\[mass\]; model 'electroadhesion' needs normal_force as a force"):
         load_dataset(str(ds_dir))
 

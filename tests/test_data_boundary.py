@@ -151,21 +151,18 @@ def test_class5_data_file_above_the_size_limit_refused_with_the_limit(ds_dir, mo
 # ---- units (issue 22 point 2) ---------------------------------------------------------------
 @pytest.mark.parametrize("unit, factor", [("mN", 1e-3), ("um", 1e-6), ("µm", 1e-6), ("μm", 1e-6), ("mm^2", 1e-6),
                                           ("mm/s", 1e-3), ("kPa", 1e3), ("kHz", 1e3), ("deg", np.pi / 180),
-                                          ("N*s/m", 1.0), ("cm", 1e-2), ("g", 1e-3), ("inch", 0.0254)])
+                                          ("N*s/m", 1.0), ("cm", 1e-2), ("g", 1e-3), ("min", 60.0),
+                                          ("mm/h", 1e-3 / 3600)])
 def test_units_converted_to_si_by_hand_factors(unit, factor):
     assert parse_unit(unit).factor == pytest.approx(factor, rel=1e-12)
 
 
-def test_coherent_si_units_read_without_pint_agree_with_pint():
-    from skinfit.io import units
-
-    ureg = units.registry()
-    for sym in units._SI:
-        if sym in ("1", "-"):
-            continue
-        got = units._coherent(sym)
-        want = frozenset((str(k), int(v)) for k, v in ureg.Quantity(1.0, sym).to_base_units().dimensionality.items())
-        assert got == want, sym
+def test_units_outside_the_grammar_refused_and_stored_in_si():
+    """Units the grammar does not read (imperial, offset scales) are refused, never guessed
+    (tests/test_units.py checks the grammar against pint); read ones are stored in SI."""
+    for text in ("inch", "degC", "psi"):
+        with pytest.raises(ValueError, match="unknown unit"):
+            parse_unit(text)
     assert si_unit("mN") == "N" and si_unit("um") == "m" and si_unit("deg") == "rad" and si_unit("MPa") == "Pa"
 
 

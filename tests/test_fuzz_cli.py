@@ -44,7 +44,7 @@ def _work(*args, **kwargs):
 
 
 #: module -> names replaced by _work: the first step of each command that costs more than reading
-STAND_INS = {"skinfit.results.fit": ["find_map"], "skinfit.analysis.compare": ["evidence"], "skinfit.report.html": ["write_report"],
+STAND_INS = {"skinfit.inference.run": ["find_map"], "skinfit.analysis.compare": ["evidence"], "skinfit.report.html": ["write_report"],
              "skinfit.apps.campaign": ["_run_locked"], "skinfit.analysis.population.population": ["run_gibbs", "reweight"],
              "skinfit.analysis.sbc": ["_map"], "skinfit.apps.demo": ["ProcessPoolExecutor"],
              "skinfit.analysis.design.plan": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"]}

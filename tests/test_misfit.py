@@ -126,14 +126,15 @@ def test_class8_strict_by_runs_fail_on_a_warned_group(tmp_path, monkeypatch, war
     """``--by`` with ``--strict`` exits 3 when a converged group warned, as a single fit does."""
     import pandas as pd
 
-    groups = importlib.import_module("skinfit.analysis.groups")
+    command = importlib.import_module("skinfit.apps.cli.fit")
     index = pd.DataFrame({"group": ["a", "b"], "rows": [5, 5], "seed": [1, 2], "converged": [True, True],
                           "warnings": [0, warned], "seconds": [0.1, 0.1], "path": ["a/fit.nc", "b/fit.nc"],
                           "status": ["done", "done"]})
-    monkeypatch.setattr(groups, "fit_by", lambda *a, **k: index)
+    monkeypatch.setattr(command, "fit_by", lambda *a, **k: index)
     from skinfit.apps.cli import main
 
-    assert main(["fit", "m", "d", "--out", str(tmp_path), "--by", "subject", "--strict"]) == code
+    argv = ["fit", "electroadhesion", "electroadhesion_synthetic", "--out", str(tmp_path), "--by", "subject", "--strict"]
+    assert main(argv) == code
 
 
 # ---- issue 39 point 3: the check was blind to what the model does not use ------------------------
