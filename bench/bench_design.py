@@ -315,11 +315,9 @@ def study_from_fit(reps, seed, folder, old=None):
                 result = module.design(fit, cands, n=4, params=params, rng=int(rng.integers(2**31)))
                 sigma = result.settings["noise"]["y"]["scale"]
                 S = lg.posterior_cov(x1, x2, sigma)
-                f = np.ix_(focus, focus)
 
-                def gain(X):
-                    after = np.linalg.inv(np.linalg.inv(S) + X.T @ X / sigma**2)
-                    return 0.5 * (np.linalg.slogdet(S[f])[1] - np.linalg.slogdet(after[f])[1])
+                def gain(X, S=S, sigma=sigma, focus=focus):
+                    return lg.subset_gain(S, X, sigma, focus)
 
                 t = result.table
                 for _, row in t.iterrows():

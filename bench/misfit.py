@@ -27,6 +27,7 @@ import argparse
 import json
 import os
 import platform
+import sys
 import time
 import warnings
 from concurrent.futures import ProcessPoolExecutor
@@ -44,6 +45,9 @@ from skinfit.inference.guardrails import BOUND_ALPHA
 from skinfit.inference.misfit import ALPHA, check_fit
 from skinfit.io.models import load_model
 from skinfit.posterior import Posterior
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from recordings import power_law_recording
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MAIN = ("electroadhesion", "contact_area", "textured_surface", "ultrasonic", "wavy_surface")
@@ -102,15 +106,7 @@ def _missing_column(seed, d_air):
 def series(seed, n=1000, phi=0.9):
     """A raw 1 kHz recording as a DataFrame: time, normal force around 1 N fluctuating row to
     row, tangential force 0.3 Fn^0.67 + 0.3 Fn plus AR(1) noise (lag-1 correlation phi, sd 20 mN)."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / 1000.0
-    fn = 1.0 + 0.1 * np.sin(2 * np.pi * 0.2 * t) + rng.uniform(-0.5, 0.5, n)
-    innovations = rng.normal(0.0, 0.02 * np.sqrt(1 - phi**2), n)
-    eps = np.empty(n)
-    eps[0] = rng.normal(0.0, 0.02)
-    for i in range(1, n):
-        eps[i] = phi * eps[i - 1] + innovations[i]
-    ft = 0.3 * fn**0.67 + 0.3 * fn + eps
+    t, fn, ft = power_law_recording(np.random.default_rng(seed), n, phi)
     return pd.DataFrame({"time [s]": t, "normal_force [N]": fn, "tangential_force [N]": ft})
 
 

@@ -78,3 +78,12 @@ def posterior_cov(x1, x2, sigma):
     """Posterior covariance of (a, b, c) after data at (x1, x2) with noise sd ``sigma``."""
     X = rows(np.asarray(x1, float), np.asarray(x2, float))
     return np.linalg.inv(np.eye(3) / PRIOR_SD**2 + X.T @ X / sigma**2)
+
+
+def subset_gain(S, X, sigma, focus):
+    """Closed-form expected information gain (nats) about the coefficients ``focus`` of the
+    measurements at design rows ``X`` (k, 3), noise sd ``sigma``, from the posterior covariance
+    ``S`` (3, 3): 0.5 log det S_ff / det S'_ff with S' = (S^-1 + X^T X / sigma^2)^-1."""
+    f = np.ix_(focus, focus)
+    after = np.linalg.inv(np.linalg.inv(S) + X.T @ X / sigma**2)
+    return 0.5 * (np.linalg.slogdet(S[f])[1] - np.linalg.slogdet(after[f])[1])

@@ -316,11 +316,9 @@ def _plane_truth(result, x1, x2, focus):
 
     sigma = result.settings["noise"]["y"]["scale"]
     S = lg.posterior_cov(x1, x2, sigma)
-    f = np.ix_(focus, focus)
 
     def gain(X):
-        after = np.linalg.inv(np.linalg.inv(S) + X.T @ X / sigma**2)
-        return 0.5 * (np.linalg.slogdet(S[f])[1] - np.linalg.slogdet(after[f])[1])
+        return lg.subset_gain(S, X, sigma, focus)
 
     t, p = result.table, result.plan
     single = np.array([gain(lg.rows([a], [b])) for a, b in zip(t["x1 [V]"], t["x2 [1]"])])

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from recordings import power_law_recording
 
 import skinfit
 from skinfit.analysis.misfit import simulated_check
@@ -162,14 +163,8 @@ def _series(seed, n=500, phi=0.9, shuffle=False, session=False):
     lag-1 correlation ``phi`` and sd 20 mN; rows shuffled on request, an unused random
     category column ``session`` on request."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n) / 1000.0
-    fn = 1.0 + 0.1 * np.sin(2 * np.pi * 0.2 * t) + rng.uniform(-0.5, 0.5, n)
-    innovations = rng.normal(0.0, 0.02 * np.sqrt(1 - phi**2), n)
-    eps = np.empty(n)
-    eps[0] = rng.normal(0.0, 0.02)
-    for i in range(1, n):
-        eps[i] = phi * eps[i - 1] + innovations[i]
-    df = pd.DataFrame({"time [s]": t, "normal_force [N]": fn, "tangential_force [N]": 0.3 * fn**0.67 + 0.3 * fn + eps})
+    t, fn, ft = power_law_recording(rng, n, phi)
+    df = pd.DataFrame({"time [s]": t, "normal_force [N]": fn, "tangential_force [N]": ft})
     if session:
         df["session"] = rng.choice(["a", "b", "c", "d"], size=n)
     return df.sample(frac=1, random_state=seed).reset_index(drop=True) if shuffle else df

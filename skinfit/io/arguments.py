@@ -17,7 +17,7 @@ from pathlib import Path
 
 from skinfit.errors import InputError, InputTypeError
 
-__all__ = ["check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path", "check_input_file",
+__all__ = ["file_kind", "check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path", "check_input_file",
            "check_output_file", "check_output_folder", "check_memory", "check_mapping", "available_memory",
            "size_text"]
 
@@ -108,14 +108,15 @@ def check_path(value, where, name, what):
     return value
 
 
-def _kind(mode):
+def file_kind(mode):
+    """What a file of st_mode ``mode`` is, for messages: "a directory", "a FIFO", "a device"..."""
     return ("a directory" if stat.S_ISDIR(mode) else "a file" if stat.S_ISREG(mode) else "a FIFO" if stat.S_ISFIFO(mode)
             else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket or other special file")
 
 
 def _kind_of(path):
     try:
-        return _kind(os.stat(path).st_mode)
+        return file_kind(os.stat(path).st_mode)
     except OSError:
         return "a broken link"
 
@@ -130,7 +131,7 @@ def check_input_file(path, what):
     except OSError as exc:
         raise InputError(path, f"cannot read the {what} ({exc.strerror})") from None
     if not stat.S_ISREG(st.st_mode):
-        raise InputError(path, f"is {_kind(st.st_mode)}: expected the {what} (skinfit reads only regular files)")
+        raise InputError(path, f"is {file_kind(st.st_mode)}: expected the {what} (skinfit reads only regular files)")
     return Path(path)
 
 

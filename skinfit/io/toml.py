@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 
 from skinfit.errors import InputError
+from skinfit.io.arguments import file_kind
 from skinfit.io.paths import entries, locate
 
 __all__ = ["read_toml", "read_regular", "sha256_file", "require", "find_file"]
@@ -34,9 +35,7 @@ def read_regular(path, max_bytes, what="file", where=None):
     except OSError as exc:
         raise InputError(where, f"cannot read the {what} ({exc.strerror})") from None
     if not stat.S_ISREG(st.st_mode):
-        kind = ("a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode)
-                else "a device" if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "not a plain file")
-        raise InputError(where, f"is {kind}, not a regular file (skinfit reads only regular files)")
+        raise InputError(where, f"is {file_kind(st.st_mode)}, not a regular file (skinfit reads only regular files)")
     too_big = (f"{what} larger than the limit of {max_bytes / 2**20:.1f} MiB "
                "(raise it with the SKINFIT_MAX_DATA_MB environment variable or max_bytes=)")
     if st.st_size > max_bytes:
