@@ -112,7 +112,8 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     _check_settings(rng, max_steps=max_steps, ess_target=ess_target, nwalkers=nwalkers,
                     checkpoint_every=checkpoint_every)
     n_global = check_count(n_global, "fit", "n_global")
-    n_local = min(check_count(n_local, "fit", "n_local", lo=0), n_global)  # at most every prior draw searched from
+    # searches from at most every prior draw; the default 4 stays valid when n_global is smaller
+    n_local = min(check_count(n_local, "fit", "n_local", lo=0, hi=max(n_global, 4)), n_global)
     n_prior_draws = check_count(n_prior_draws, "fit", "n_prior_draws")
     progress, resume = (check_flag(v, "fit", k) for k, v in (("progress", progress), ("resume", resume)))
     if checkpoint is not None:
