@@ -17,9 +17,9 @@ from pathlib import Path
 
 from skinfit.errors import InputError, InputTypeError
 
-__all__ = ["file_kind", "check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path", "check_input_file",
-           "check_output_file", "check_output_folder", "check_memory", "check_mapping", "available_memory",
-           "size_text"]
+__all__ = ["file_kind", "check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path",
+           "check_input_file", "check_output_file", "check_output_folder", "check_memory", "check_mapping",
+           "available_memory", "size_text"]
 
 
 def shown(value, limit=60):
