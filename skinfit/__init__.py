@@ -33,7 +33,8 @@ _PUBLIC = {
     "InputError": "skinfit.errors", "InputTypeError": "skinfit.errors", "ForwardError": "skinfit.errors",
     "MissingDependency": "skinfit.errors", "WorkerError": "skinfit.errors",
     "ConvergenceWarning": "skinfit.errors", "SupportWarning": "skinfit.errors", "IntegrityWarning": "skinfit.errors",
-    "MisfitWarning": "skinfit.inference.misfit", "PopulationWarning": "skinfit.analysis.population.result",
+    "MisfitWarning": "skinfit.inference.misfit", "RawSeriesWarning": "skinfit.inference.misfit",
+    "PopulationWarning": "skinfit.analysis.population.result",
     "ShadowWarning": "skinfit.io.provenance",
 }
 

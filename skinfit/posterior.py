@@ -13,6 +13,7 @@ import numpy as np
 from skinfit.errors import InputError
 from skinfit.io.data import check_units
 from skinfit.io.forward_check import check_forward, check_quantiles, forward_error
+from skinfit.io.known_se import covariate_se, observable_se
 from skinfit.io.labels import level_labels, noise_parameter_names, noise_suffix
 from skinfit.io.models import resolve_constants, resolve_forward, resolve_noise, resolve_split
 from skinfit.io.priors import check_physical, check_priors_for, prior_groups
@@ -80,6 +81,9 @@ class Posterior:
         ``normal`` (default, or the card's), ``student_t`` or ``lognormal``.
     constants : mapping, optional
         Overrides of the model card's fixed constants.
+
+    A dataset column ``<observable>_se`` (:mod:`skinfit.io.known_se`) adds a known variance per
+    row: noise sd sqrt(sigma^2 + se_i^2) (:meth:`noise_scale`), sigma the extra scatter.
     """
 
     CHUNK = 256  # parameter vectors per forward call (memory bound)
@@ -126,6 +130,9 @@ class Posterior:
                                  f"likelihood (got {self.y[o][row - 1]:g})", row=row)
         self.n = len(frame)
         self._logy = {o: np.log(self.y[o]) for o in self.observables if noise[o] == "lognormal"}
+        self.se = observable_se(dataset, model, self.observables)  # observable -> known per-row se (n,), SI
+        self._se2 = {o: (se / self.y[o] if noise[o] == "lognormal" else se) ** 2 for o, se in self.se.items()}
+        self.covariate_se = covariate_se(dataset, model)  # reported, not modelled
         self._sum_logy = {o: float(v.sum()) for o, v in self._logy.items()}
 
         # which sampled slot feeds each parameter
@@ -358,9 +365,10 @@ class Posterior:
                 if mu_u.shape != (k, self.n_unique):
                     mu_u = np.broadcast_to(mu_u, (k, self.n_unique))
                 noise = self.noise[o]
-                if predict or pointwise or noise == "student_t":
+                per_row = noise == "student_t" or o in self._se2  # no sufficient statistics
+                if predict or pointwise or per_row:
                     pred[o] = mu_u[:, self._inverse]
-                if noise != "student_t" and not pointwise:
+                if not (pointwise or per_row):
                     sigma = params[f"sigma{self._suffix(o)}"]
                     ss = standardised_squares(self._zbar[o], self._ssw[o], self._counts, mu_u, sigma,
                                               noise == "lognormal").sum(axis=1)
@@ -368,7 +376,7 @@ class Posterior:
                                  else (self._counts * np.log(sigma)).sum(axis=1))
                     ll[o] = -0.5 * ss - log_sigma - 0.5 * self.n * _LOG_2PI - self._sum_logy.get(o, 0.0)
                 else:
-                    sigma = self._noise_param(theta, "sigma", o)
+                    sigma = self.noise_scale(theta, o)
                     if noise == "lognormal":  # the log on distinct rows, then to every row
                         r = np.log(mu_u)[:, self._inverse]
                         np.subtract(self._logy[o], r, out=r)
@@ -376,8 +384,7 @@ class Posterior:
                         r = self.y[o] - pred[o]
                     r /= sigma
                     if noise == "student_t":
-                        # here, not with the module: scipy (~0.2 s) only for Student-t noise; reading
-                        # and reporting saved fits rebuild posteriors without it (tests/test_population.py)
+                        # here, not with the module: scipy (~0.2 s) only for Student-t noise (tests/test_population.py)
                         from scipy import special
 
                         nu = self._noise_param(theta, "nu", o)
@@ -488,12 +495,20 @@ class Posterior:
     def _observe(self, eps, mu, theta, o):
         """Standardised noise ``eps`` (k, n) turned into observations around predictions ``mu``
         of parameter vectors ``theta``, in place (these are (draws, rows) arrays)."""
-        eps *= self._noise_param(theta, "sigma", o)
+        eps *= self.noise_scale(theta, o)
         if self.noise[o] == "lognormal":
             np.exp(eps, out=eps)
             eps *= mu
         else:
             eps += mu
+
+    def noise_scale(self, theta, o):
+        """The sd (scale, for Student-t) of observable ``o``'s noise in the likelihood's space
+        (of log y for log-normal noise) at parameter vectors ``theta`` (k, d): sigma, (k, 1) or,
+        split by a column, (k, n); with known per-row standard errors se_i, sqrt(sigma^2 + se_i^2)
+        (k, n), se_i / y_i in place of se_i for log-normal noise (the delta method)."""
+        sigma = self._noise_param(theta, "sigma", o)
+        return np.sqrt(sigma * sigma + self._se2[o]) if o in self._se2 else sigma
 
     def _suffix(self, o):
         return noise_suffix(self.observables, o)
@@ -579,7 +594,7 @@ class Posterior:
         raise RuntimeError(f"{self.model.id}: no prior draw inside the physical support in "
                            f"{batch * max_batches} tries ({self.model.support})")
 
-    def describe(self):
-        return {"parameters": list(self.names), "observables": list(self.observables),
-                "noise": dict(self.noise), "split": {p: list(c) for p, c in self.split.items()},
-                "n_rows": self.n}
+    def describe(self):  # the fit's "setup" attribute
+        return {"parameters": list(self.names), "observables": list(self.observables), "noise": dict(self.noise),
+                "split": {p: list(c) for p, c in self.split.items()}, "n_rows": self.n} | (
+            {"known_se": list(self.se)} if self.se else {})

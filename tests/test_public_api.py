@@ -22,6 +22,7 @@ FROZEN = {
     'PopulationResult': "class(model_id: 'str', parameters: 'list', families: 'list', subjects: 'list', mu: 'np.ndarray', sd: 'np.ndarray', corr: 'np.ndarray | None', shrunk: 'np.ndarray', separate: 'dict', hyperpriors: 'dict', sampler: 'dict' = <factory>, warnings: 'list' = <factory>, contraction: 'dict' = <factory>, inputs: 'dict' = <factory>, origin: 'str' = '') -> None contrast converged coordinates diagnostics effect effects get log origin population_draws predictive problems save subject_summary summary to_datatree",
     'PopulationWarning': 'exception(UserWarning)',
     'PriorSet': "class(id: 'str', model: 'str', priors: 'MappingProxyType', path: 'str' = '', sha256: 'str' = '', text: 'str' = '', file: 'str' = '') -> None file names path sha256 text",
+    'RawSeriesWarning': 'exception(MisfitWarning)',
     'ShadowWarning': 'exception(UserWarning)',
     'SupportWarning': 'exception(UserWarning)',
     'WorkerError': 'exception(Portable, RuntimeError)',

@@ -7,7 +7,8 @@ predictive assessment of model fitness via realized discrepancies"): for posteri
 theta_s and one replicated data set y_rep_s per draw, a discrepancy T(y, theta_s) against
 T(y_rep_s, theta_s); the p-value is the share of draws where the replicate is at least as
 extreme, (1 + #{T_rep >= T_obs}) / (1 + S).  The discrepancies use the standardised residuals
-r = (g(y) - g(mu)) / sigma (g = log for log-normal noise, the identity otherwise; Student-t
+r = (g(y) - g(mu)) / sigma (g = log for log-normal noise, the identity otherwise; sigma the
+row's noise sd sqrt(sigma^2 + se_i^2) where the data give known standard errors; Student-t
 residuals are compared with Student-t replicates), all observables together:
 
 * ``chi_square``: sum of r^2 (too much scatter overall);
@@ -61,7 +62,8 @@ from scipy import sparse
 from skinfit.io.units import dimension
 
 __all__ = ["ALPHA", "PARETO_K", "PARETO_SHARE", "TAIL_Z", "TREND_BINS", "PPC_DRAWS", "LOO_DRAWS", "LOO_ROWS",
-           "MisfitWarning", "check_fit", "misfit_messages"]
+           "MisfitWarning", "RawSeriesWarning", "check_fit", "misfit_messages", "raw_series", "INGEST_HINT",
+           "RAW_ROWS", "TIME_COLUMNS"]
 
 ALPHA = 0.02
 PARETO_K = 0.7
@@ -80,6 +82,41 @@ LOO_ROWS = 500
 
 class MisfitWarning(UserWarning):
     """Evidence that the fitted model does not describe the data (see :mod:`skinfit.inference.misfit`)."""
+
+
+class RawSeriesWarning(MisfitWarning):
+    """The data look like a raw recording (samples at a uniform time step) fitted as if each
+    sample were an independent measurement: reduce it to one row per stroke first
+    (``skinfit ingest``); see :func:`raw_series`."""
+
+
+#: What to do with a raw recording, named by every warning that suspects one.
+INGEST_HINT = "reduce the raw recording to one row per stroke with `skinfit ingest RAW --rig RIG.toml`"
+#: More rows than this at a uniform time step: a raw recording (:func:`raw_series`).
+RAW_ROWS = 1000
+#: Names (any case) of the time column of a raw recording.
+TIME_COLUMNS = ("time", "t", "timestamp")
+
+
+def raw_series(dataset):
+    """A warning's text when ``dataset`` looks like a raw recording fitted by mistake, else None:
+    more than :data:`RAW_ROWS` rows and a column named as in :data:`TIME_COLUMNS` with a unit of
+    time whose consecutive differences are one positive step to 0.1% on at least 99% of the rows
+    (a sampled signal; trials joined end to end keep their few jumps).  Per-stroke data (a start
+    time per stroke, strokes of varying length) and designed experiments do not have one."""
+    if len(dataset.frame) <= RAW_ROWS:
+        return None
+    for c in dataset.columns:
+        if c.name.lower() not in TIME_COLUMNS or not c.unit or dimension(c.unit) != "time":
+            continue
+        step = np.diff(dataset.frame[c.name].to_numpy(dtype=float))
+        h = float(np.median(step)) if len(step) else 0.0
+        if not (h > 0 and np.mean(np.abs(step - h) <= 1e-3 * h) >= 0.99):
+            continue
+        return (f"{len(dataset.frame)} rows at a uniform time step of {h:.3g} s ({1 / h:.4g} Hz) in column "
+                f"{c.header!r}: this looks like a raw recording whose samples are fitted as independent "
+                f"measurements (they are not: the posterior would be far too narrow); {INGEST_HINT}")
+    return None
 
 
 def _bins(x, n_bins):
@@ -237,7 +274,7 @@ def check_fit(post, theta, y_rep, *, log_lik=None, reff=1.0, alpha=ALPHA, n_draw
             g = np.log if log else np.asarray
             with np.errstate(divide="ignore", invalid="ignore"):
                 mu = g(pred[o])
-                sigma = post._noise_param(th, "sigma", o)
+                sigma = post.noise_scale(th, o)  # sqrt(sigma^2 + se_i^2) with known per-row se
                 res[o] = ((g(post.y[o]) - mu) / sigma, (g(y_rep[o][sel]) - mu) / sigma)
             r_sum[o] += res[o][0].sum(axis=0)
         for which, out in ((0, t_obs), (1, t_rep)):
@@ -343,7 +380,7 @@ def misfit_messages(record):
             what = (f"neighbouring rows' residuals are correlated in {column} (lag-1 autocorrelation "
                     f"{c['statistic']:.2f}, replicates {c['replicated']:.2f}): the rows are not independent "
                     f"measurements (a time series fitted as independent rows?) or drift along that order; "
-                    f"the posterior is then too narrow")
+                    f"the posterior is then too narrow; if the rows are samples of a recording, {INGEST_HINT}")
         else:
             means = record["trend_means"].get(name, [])
             what = (f"the residuals drift with {column}{unused} (mean standardised residual by bin, low to high: "

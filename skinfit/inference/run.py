@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +25,7 @@ import pandas as pd
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import Checkpoint, load_checkpoint, run_identity
 from skinfit.inference.guardrails import assess_run
+from skinfit.inference.misfit import RawSeriesWarning, raw_series
 from skinfit.inference.optimize import MAPResult, find_map, laplace_covariance
 from skinfit.inference.proposal import MixtureT
 from skinfit.inference.sampling import (
@@ -130,6 +132,9 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     seed = rng if isinstance(rng, (int, np.integer)) else None
     rng = as_generator(rng)
     post = Posterior(model, priors, dataset, split=split, noise=noise, constants=constants)
+    raw = raw_series(dataset)  # a raw recording fitted by mistake: said now, before the sampling it would waste
+    if raw:
+        warnings.warn(f"{model.id} on {dataset.id}: {raw}", RawSeriesWarning, stacklevel=3)
 
     if nwalkers is not None and nwalkers < 2 * post.ndim:  # emcee's ensemble moves need it
         raise InputError("fit", f"expected at least 2 walkers per sampled parameter, {2 * post.ndim} for the "
@@ -161,6 +166,7 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
                         checkpoint=ckpt, resume=saved, proposal=proposal, check_every=CHECK_EVERY,
                         natural=post.to_theta)
     found, notes = assess_run(post, sampler)
+    found = [{"check": "raw_series", "status": "WARN", "parameter": None, "message": raw}] * bool(raw) + found
     return Run(posterior=post, sampler=sampler, map=map_result, importance=tuple(rounds), rng=rng, seed=seed,
                seed_drawn=seed_drawn, inputs=inputs, warnings=found, notes=notes,
                timings={"map_s": map_result.seconds, "start_s": t_start_s if saved is None else 0.0,

@@ -82,8 +82,9 @@ def variable_attrs(post):
         unit = next(q.unit for q in model.observables if q.name == o)
         suffix = noise_suffix(post.observables, o)
         lognormal = post.noise[o] == "lognormal"
+        extra = " beyond its per-row standard errors" if o in getattr(post, "se", {}) else ""
         out[f"sigma{suffix}"] = {"units": "1" if lognormal else unit,
-                                 "long_name": f"noise scale of {o}" + (" (of its log)" if lognormal else "")}
+                                 "long_name": f"noise scale of {o}" + (" (of its log)" if lognormal else "") + extra}
         out[f"nu{suffix}"] = {"units": "1", "long_name": f"Student-t degrees of freedom of the noise of {o}"}
     for c in post.dataset.columns:
         if c.name not in out:

@@ -113,8 +113,8 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     t = result.timings
     tree.attrs["timings"] = json.dumps({"map_s": t["map_s"], "start_s": t["start_s"], "sampling_s": t["sampling_s"],
                                         "tree_s": now - t_tree, "total_s": now - t_start, "resumed": t["resumed"]})
-    for w in result.warnings:  # non-convergence was warned above
-        if w["check"] != "convergence":
+    for w in result.warnings:  # non-convergence was warned above, a raw recording by run()
+        if w["check"] not in ("convergence", "raw_series"):
             warnings.warn(f"{post.model.id} on {post.dataset.id}: {w['message']}", ConvergenceWarning, stacklevel=2)
     if not complete:
         return Fit(tree, posterior=post, pointwise=pointwise)

@@ -67,7 +67,9 @@ def compute_summary(fit):
                                + [f"ON A BOUND: {w['message']}" for w in fit.warnings
                                   if w["check"] == "bound" and w["parameter"] == name]
                                + [f"at a bound (note): {w['message']}" for w in fit.notes
-                                  if w["parameter"] == name]))
+                                  if w["parameter"] == name and w.get("check", "bound") == "bound"]
+                               + ["extra scatter beyond the per-row standard errors in the data" for w in fit.notes
+                                  if w["parameter"] == name and w.get("check") == "known_se"]))
     table["map"] = [fit.map[n] for n in table.index]
     table["tau"] = [sampler["tau"][n] for n in table.index]
     table["contraction"] = contraction

@@ -24,11 +24,11 @@ from skinfit.inference.misfit import MisfitWarning, check_fit, misfit_messages
 from skinfit.inference.run import pointwise_thinning
 from skinfit.inference.sampling import describe_moves, sampler_settings
 from skinfit.io import integrity
-from skinfit.io.labels import annotate, level_labels
+from skinfit.io.labels import annotate, level_labels, noise_suffix
 from skinfit.io.units import si_unit
 from skinfit.results.fit import GROUPS
 
-__all__ = ["build_tree", "Pointwise", "versions"]
+__all__ = ["build_tree", "Pointwise", "versions", "known_se_record"]
 
 _VERSIONED = ("skinfit", "numpy", "scipy", "emcee", "nlopt", "arviz", "arviz-base", "arviz-stats",
               "xarray", "pandas")
@@ -100,6 +100,10 @@ def build_tree(result, n_prior_draws):
         "support_condition": post.model.support,
         "warnings": json.dumps(result.warnings), "notes": json.dumps(result.notes),
     }
+    known = known_se_record(post)
+    if known:  # per-row standard errors in the likelihood (observables) or reported (covariates)
+        attrs["known_se"] = json.dumps(known)
+        attrs["notes"] = json.dumps(result.notes + known["notes"])
     observed = {o: post.y[o] for o in post.observables}
     sample_stats = {"lp": lp_nat.reshape(nw, nd),
                     "acceptance": np.broadcast_to(run.acceptance[:, None], (nw, nd)).copy()}
@@ -184,6 +188,34 @@ def _check_misfit(tree, extra, post, theta):
     tree.attrs["misfit"] = json.dumps(record)
     tree.attrs["warnings"] = json.dumps(json.loads(tree.attrs.get("warnings", "[]")) + found)
     return found
+
+
+def known_se_record(post):
+    """What Posterior ``post`` does with the dataset's standard-error columns
+    (:mod:`skinfit.io.known_se`), for a fit's ``known_se`` root attribute: ``observables``
+    (observable -> column, median and max se in SI, the noise parameter it adds to),
+    ``covariates`` (covariate -> column, largest relative se and its row) and the ``notes`` the
+    fit shows (guard-rail notes: check ``known_se``, status NOTE); {} when the data have none."""
+    if not post.se and not post.covariate_se:
+        return {}
+    obs, notes = {}, []
+    for o, se in post.se.items():
+        sigma = f"sigma{noise_suffix(post.observables, o)}"
+        log = "; as se_i / y_i on the log scale, the delta method" if post.noise[o] == "lognormal" else ""
+        unit = next(q.unit for q in post.model.observables if q.name == o)
+        obs[o] = {"column": f"{o}_se", "median": float(np.median(se)), "max": float(np.max(se)), "sigma": sigma,
+                  "unit": unit}
+        notes.append({"check": "known_se", "status": "NOTE", "parameter": sigma,
+                      "message": f"{o}: per-row standard errors from the dataset added in quadrature to {sigma} "
+                                 f"({o}_se, median {np.median(se):.3g} {unit}{log}): {sigma} is the extra "
+                                 "stroke-to-stroke scatter beyond them"})
+    for c, r in post.covariate_se.items():
+        largest = ("" if r["max_relative"] is None
+                   else f"; largest relative standard error {r['max_relative']:.2g} (row {r['row']})")
+        notes.append({"check": "known_se", "status": "NOTE", "parameter": None,
+                      "message": f"{c}: standard errors in the dataset ({r['column']}) reported, not modelled: {c} "
+                                 f"is treated as known (errors-in-variables not modelled){largest}"})
+    return {"observables": obs, "covariates": dict(post.covariate_se), "notes": notes}
 
 
 def _derived_group(post, theta, nw, nd, dims, coords, attrs):

@@ -113,8 +113,13 @@ def gaussian_density(loc, cov):
     return (lambda u: np.atleast_1d(dist.logpdf(u))), log_marginal
 
 
-def noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None):
-    """observable -> (kind, nu) and sigma (r,) in the likelihood's space."""
+def noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None, known_se=None):
+    """observable -> (kind, nu) and sigma (r,) in the likelihood's space.
+
+    ``known_se`` (observable -> a typical per-row standard error in the likelihood's space, e.g.
+    the median of a fit's data): a fit whose data gave their standard errors estimated sigma as
+    the scatter beyond them, so a new measurement's noise sd is sqrt(sigma^2 + se^2) (unless
+    ``noise_scale`` gives it)."""
     obs = model.observable_names
     scale = {}
     for o in obs:
@@ -123,7 +128,7 @@ def noise_setup(model, priors, noise_kinds, noise_scale, fit_draws=None):
         if given is not None:
             scale[o] = float(given)
         elif fit_draws is not None:
-            scale[o] = float(np.median(fit_draws[f"sigma{suffix}"]))
+            scale[o] = float(np.hypot(np.median(fit_draws[f"sigma{suffix}"]), (known_se or {}).get(o, 0.0)))
         else:
             scale[o] = float(priors[f"sigma{suffix}"].ppf(0.5))
         if not (math.isfinite(scale[o]) and scale[o] > 0):

@@ -126,7 +126,9 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
         if len(theta) > n_draws:
             theta = theta[rng.choice(len(theta), n_draws, replace=False)]
         cols = {s.name: theta[:, j] for j, s in enumerate(post.slots)}
-        noise, sigma = noise_setup(model, priors, noise_kinds, noise_scale, cols)
+        typical_se = {o: float(np.median(se / post.y[o] if post.noise[o] == "lognormal" else se))
+                      for o, se in post.se.items()}  # the fit's sigma is the scatter beyond them
+        noise, sigma = noise_setup(model, priors, noise_kinds, noise_scale, cols, typical_se)
         draws = np.column_stack([cols[p] for p in names])
         is_log = log_coordinates(priors, names)
         u = to_u(draws, is_log)

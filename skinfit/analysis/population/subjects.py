@@ -157,7 +157,8 @@ class _Stacked:
     """The log-likelihoods of all S subjects in one forward call: the subjects' distinct rows
     (:meth:`Posterior._unique_rows`) concatenated (N rows), each parameter given per row as
     (C, N), and the normal / log-normal sums of squares reduced per subject.  Needs one model,
-    the same constants and normal or log-normal noise; :meth:`Subjects.use_stacked` checks
+    the same constants and normal or log-normal noise without known per-row standard errors
+    (:attr:`skinfit.posterior.Posterior.se`); :meth:`Subjects.use_stacked` checks
     the result against the subjects' own likelihoods before it is used."""
 
     def __init__(self, posts):
@@ -168,7 +169,9 @@ class _Stacked:
                 and all(np.array_equal(p.constants[k], first.constants[k]) for k in first.constants) for p in posts)
         except (TypeError, ValueError):
             same = False
-        if not same or any(p.noise[o] not in ("normal", "lognormal") for p in posts for o in p.observables) or any(
+        # known per-row standard errors (Posterior.se): no sufficient statistics, each subject's own likelihood
+        if not same or any(p.se for p in posts) or any(
+                p.noise[o] not in ("normal", "lognormal") for p in posts for o in p.observables) or any(
                 p.observables != first.observables or p._param_index_u.keys() != first._param_index_u.keys()
                 for p in posts):
             raise _NotStackable
