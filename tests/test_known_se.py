@@ -25,6 +25,7 @@ from skinfit.errors import InputError
 from skinfit.inference.misfit import INGEST_HINT, MisfitWarning, RawSeriesWarning, misfit_messages, raw_series
 from skinfit.posterior import Posterior
 from skinfit.results.fit import rebuild_posterior
+from skinfit.results.tree import known_se_record
 
 MODEL = "electroadhesion_coulomb"
 MU, SIGMA = 0.55, 0.02  # generating friction coefficient and extra scatter [N]
@@ -129,6 +130,11 @@ def test_covariate_standard_errors_are_reported_not_modelled(rng):
     same = _post(frame.drop(columns=["normal_force_se [mN]"]))
     theta = _theta(post)
     assert post.log_likelihood(theta)[0] == same.log_likelihood(theta)[0]  # not modelled
+    notes = [n["message"] for n in known_se_record(post)["notes"]]
+    assert notes[1] == ("normal_force: standard errors in the dataset (normal_force_se) reported, not modelled: "
+                        "normal_force is treated as known (errors-in-variables not modelled); largest relative "
+                        "standard error 0.1 (row 6)")
+    assert known_se_record(same)["covariates"] == {} and "normal_force" not in known_se_record(same)
 
 
 # ---- a fit: recovery, what it records, the evidence ---------------------------------------
