@@ -166,7 +166,8 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
                         checkpoint=ckpt, resume=saved, proposal=proposal, check_every=CHECK_EVERY,
                         natural=post.to_theta)
     found, notes = assess_run(post, sampler)
-    found = [{"check": "raw_series", "status": "WARN", "parameter": None, "message": raw}] * bool(raw) + found
+    if raw:  # recorded with the guard rails' findings (warned above)
+        found = [{"check": "raw_series", "status": "WARN", "parameter": None, "message": raw}, *found]
     return Run(posterior=post, sampler=sampler, map=map_result, importance=tuple(rounds), rng=rng, seed=seed,
                seed_drawn=seed_drawn, inputs=inputs, warnings=found, notes=notes,
                timings={"map_s": map_result.seconds, "start_s": t_start_s if saved is None else 0.0,
