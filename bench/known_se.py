@@ -96,7 +96,7 @@ def main():
              f"`MPLBACKEND=Agg .venv/bin/python bench/known_se.py --experiments {n} --rows {args.rows}`; "
              f"skinfit {skinfit.__version__}, {os.cpu_count()} CPUs (2 cores shared with other jobs; load "
              f"{os.getloadavg()[0]:.1f} at the end).", "",
-             __doc__.split("\n\n")[1].replace("\n", " "), "",
+             __doc__.split("\n\n")[2].replace("\n", " "), "",
              f"{n} experiments of {args.rows} strokes; fits with se: median {np.median(seconds):.1f} s, "
              f"{unconverged} not converged; {len(REDRAWN)} experiment(s) drawn again for a force < 0.", "",
              "| data | parameter | " + " | ".join(f"{p:.0%} interval: hits (expected; 95% band)" for p in LEVELS) + " |",
