@@ -21,6 +21,7 @@ from scipy.special import logsumexp
 import skinfit
 from skinfit.analysis.design.model_problem import noise_setup
 from skinfit.analysis.population.subjects import _NotStackable, _Stacked
+from skinfit.apps.cli import main
 from skinfit.errors import InputError
 from skinfit.inference.misfit import INGEST_HINT, MisfitWarning, RawSeriesWarning, misfit_messages, raw_series
 from skinfit.posterior import Posterior
@@ -295,3 +296,32 @@ def test_serial_correlation_warning_names_ingest():
                           "p": 0.001, "threshold": 0.005, "warn": True}]}
     (message,) = misfit_messages(record)
     assert INGEST_HINT in message["message"]
+
+
+# ---- the command line: printed, saved, read back ----------------------------------------------
+def test_cli_fit_says_so_and_the_saved_fit_keeps_the_standard_errors(tmp_path, capsys):
+    frame = _frame(120, np.random.default_rng(7))
+    csv = tmp_path / "strokes.csv"
+    frame.to_csv(csv, index=False)
+    (tmp_path / "flat.toml").write_text(PRIORS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        code = main(["fit", MODEL, str(csv), "--priors", str(tmp_path / "flat.toml"), "--out",
+                     str(tmp_path / "run"), "--seed", "2", "--quiet"])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "NOTE: tangential_force: per-row standard errors from the dataset added in quadrature to sigma" in out
+    loaded = skinfit.load_fit(tmp_path / "run" / "fit.nc")
+    se = frame["tangential_force_se [mN]"].to_numpy() / 1e3
+    np.testing.assert_allclose(loaded.posterior.se["tangential_force"], se, rtol=1e-12)
+    assert loaded.attr("known_se")["observables"]["tangential_force"]["column"] == "tangential_force_se"
+
+
+def test_cli_refuses_a_negative_standard_error_in_one_line(tmp_path, refused):
+    frame = _frame(12, np.random.default_rng(1))
+    frame.loc[4, "tangential_force_se [mN]"] = -1.0
+    frame.to_csv(tmp_path / "strokes.csv", index=False)
+    refused(["fit", MODEL, str(tmp_path / "strokes.csv"), "--out", str(tmp_path / "run")],
+            tmp_path / "strokes.csv",
+            "column 'tangential_force_se [mN]', row 5: expected a force >= 0 (got -1 mN; declare `signed = true` "
+            "if negative values are meaningful)")
