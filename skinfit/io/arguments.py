@@ -210,12 +210,12 @@ def frame_type_error(value, where, name=None):
     """The InputTypeError for a table given as something other than a DataFrame, saying what to
     pass instead (a dict, a numpy array, an xarray Dataset are common)."""
     kind = type(value)
-    if isinstance(value, Mapping):
+    if kind.__module__.startswith("xarray") and hasattr(value, "to_dataframe"):
+        hint = "pass a pandas DataFrame: ds.to_dataframe().reset_index()"
+    elif isinstance(value, Mapping):
         hint = "pass a pandas DataFrame: pd.DataFrame(d)"
     elif kind.__module__ == "numpy" and kind.__name__ == "ndarray":
         hint = "pass a pandas DataFrame with named columns: pd.DataFrame(a, columns=[...])"
-    elif kind.__module__.startswith("xarray") and hasattr(value, "to_dataframe"):
-        hint = "pass a pandas DataFrame: ds.to_dataframe().reset_index()"
     else:
         hint = "pass a pandas DataFrame"
     shown = kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__.split('.')[0]}.{kind.__name__}"

@@ -195,19 +195,24 @@ def max_data_bytes():
                          f"{os.environ['SKINFIT_MAX_DATA_MB']!r})") from None
 
 
-def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
-                 units: Mapping[str, str] | None = None, max_bytes: int | None = None) -> Dataset:
-    """Load a dataset by id (``datasets/<id>/``), by the path of its folder or card, or from a
-    CSV file whose header gives the units (``normal_force [mN], voltage [V], ...``).
+def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None, units: Mapping[str, str] | None = None,
+                 columns: Mapping[str, str] | None = None, max_bytes: int | None = None) -> Dataset:
+    """Load a dataset by id (``datasets/<id>/``), by the path of its folder or card (one written
+    by ``skinfit dataset init`` reads a lab's file through its ``[read]`` options and column
+    map), or from a table file without a card whose header gives the units (``normal_force [mN],
+    voltage [V], ...``; a CSV, or an Excel, MATLAB or HDF5 file).
 
-    ``model`` (a Model or id) and ``units`` (column -> unit, for headers without one) serve a
-    CSV without a card: the model says which columns are quantities, and their units are checked
-    against its card.  A card's data ``file`` must lie inside the card's folder.
+    ``model`` (a Model or id), ``units`` (column -> unit, for headers without one) and
+    ``columns`` (header -> skinfit name) serve a file without a card: the model says which
+    columns are quantities, and their units are checked against its card.  A card's data
+    ``file`` must lie inside the card's folder.
     """
     max_bytes = max_data_bytes() if max_bytes is None else max_bytes
     p = Path(check_path(name, "load_dataset", None, "a dataset id, its folder or card, or a CSV file"))
     if p.suffix.lower() in (".csv", ".txt") or (p.exists() and not p.is_dir() and p.suffix != ".toml"):
-        return _load_csv(p, model=model, units=units, max_bytes=max_bytes)
+        return _load_csv(p, model=model, units=units, columns=columns, max_bytes=max_bytes)
+    if columns:
+        raise InputError(display(p), "columns= applies to a file without a card (a card maps its columns)")
     card = find_file("datasets", name)
     doc, text = read_toml(card)
     where = display(card)
@@ -344,7 +349,7 @@ def _as_model(model):
     return load_model(model)
 
 
-def _load_csv(path, *, model=None, units=None, max_bytes=None):
+def _load_csv(path, *, model=None, units=None, columns=None, max_bytes=None):
     """A dataset from a table file without a card: a CSV with units in its header (``name
     [unit]``), or an Excel, MATLAB or HDF5 file whose column names are skinfit's."""
     model = _as_model(model)
@@ -352,11 +357,12 @@ def _load_csv(path, *, model=None, units=None, max_bytes=None):
     raw = read_regular(path, max_data_bytes() if max_bytes is None else max_bytes, "data file", where=where)
     if tables.detect_format(raw, where) == "csv":
         headers, _ = tables.split_csv(raw, where)
-        columns = _columns_from_header(headers, where, model, units)
+        columns = _columns_from_header(headers, where, model, units, _check_columns(columns, headers, where))
         frame = read_table(raw, columns, where)
     else:  # read with the libraries made for the format (skinfit.io.tables)
         lab = tables.read_lab_table(raw, where)
-        columns = _columns_from_header(lab.headers, where, model, units, file_units=lab.units)
+        columns = _columns_from_header(lab.headers, where, model, units, _check_columns(columns, lab.headers, where),
+                                       file_units=lab.units)
         frame = validate_table(lab.cells, columns, where, rows=lab.rows)
     sha = hashlib.sha256(raw).hexdigest()
     provenance = {"kind": "measured", "note": "read from a CSV without a dataset card (kind assumed)",
@@ -426,12 +432,9 @@ def as_dataset(data, model=None, units=None, columns=None):
     if isinstance(data, (Mapping, np.ndarray)) or type(data).__module__.startswith("xarray"):
         raise frame_type_error(data, "dataset")
     check_path(data, "dataset", None, "a Dataset, a pandas DataFrame, a dataset id, its folder or card, or a CSV file")
-    if columns:
-        raise InputError("columns", "applies to a DataFrame; for a file, write its card with skinfit dataset init "
-                         "FILE --model MODEL --column 'HEADER=name'")
     if units and Path(data).suffix.lower() not in (".csv", ".txt"):
         raise InputError("units", "units= applies to a DataFrame or a CSV; a dataset card states its units")
-    return load_dataset(data, model=model, units=units)
+    return load_dataset(data, model=model, units=units, columns=columns)
 
 
 def check_units(dataset, model):

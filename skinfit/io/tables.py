@@ -294,18 +294,18 @@ def _check_header(header, where, row):
 
 def _detect_decimal(header, columns, rows, where):
     """``,`` when numbers are written only with a decimal comma, else ``.``; both in one file is
-    ambiguous (``1.500`` may be a thousands mark) and an error naming a cell of each."""
+    ambiguous (``1.500`` may be a thousands mark): an error at the first cell breaking the mark
+    of the cells above it, naming a cell of the other mark too."""
     first = {}
-    for h, col in zip(header, columns):
-        for i, cell in enumerate(col):
-            for mark, pattern in ((".", _NUMBER_DOT), (",", _NUMBER_COMMA)):
-                if mark not in first and pattern.match(cell):
-                    first[mark] = (h, i, cell)
-        if len(first) == 2:
-            (h1, i1, c1), (h2, i2, c2) = first["."], first[","]
-            raise InputError(where, f"numbers with a decimal point ({c1!r}, column {h1!r}, row {rows[i1]}) and "
-                             f"a decimal comma ({c2!r}): give the decimal mark (--decimal, or decimal in [read])",
-                             field=f"column {h2!r}", row=int(rows[i2]))
+    for mark, pattern in ((".", _NUMBER_DOT), (",", _NUMBER_COMMA)):
+        found = [(i, h, cell) for h, col in zip(header, columns) for i, cell in enumerate(col) if pattern.match(cell)]
+        if found:
+            first[mark] = min(found, key=lambda t: t[0])
+    if len(first) == 2:
+        (i1, h1, c1), (i2, h2, c2) = sorted(first.values(), key=lambda t: t[0])
+        raise InputError(where, f"{c2!r} is written with the other decimal mark than {c1!r} (column {h1!r}, row "
+                         f"{rows[i1]}): give the decimal mark (--decimal, or decimal in [read])",
+                         field=f"column {h2!r}", row=int(rows[i2]))
     return "," if "," in first else "."
 
 
