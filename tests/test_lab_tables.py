@@ -19,7 +19,7 @@ import scipy.io
 import skinfit
 from skinfit.apps.cli import main
 from skinfit.errors import InputError, InputTypeError, MissingDependency
-from skinfit.io.data import from_frame, load_dataset
+from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.io.mapping import init_dataset
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
@@ -329,3 +329,12 @@ def test_what_fit_cannot_take_says_what_to_pass(value, match):
     with pytest.raises(InputTypeError, match=match) as err:
         skinfit.fit(MODEL, value, **QUICK)
     assert "\n" not in str(err.value)
+
+
+def test_a_workbook_named_csv_is_read_as_one_and_its_card_rereads_it(lab, tmp_path):
+    src = _workbook(lab, tmp_path / "export.xlsx").rename(tmp_path / "export.csv")
+    ds = load_dataset(src, model=MODEL)  # never "not UTF-8 text"
+    _check_values(ds, lab)
+    card = write_card(ds, tmp_path / "run" / "dataset")  # as skinfit fit writes it beside a result
+    assert 'format = "xlsx"' in card.read_text()
+    _check_values(load_dataset(card.parent), lab)

@@ -478,6 +478,9 @@ def write_card(dataset, folder, data_name="data.csv"):
     lines += [f"file = {json.dumps(data_name)}", f"groups = {json.dumps(list(dataset.groups))}", "",
               "[provenance]"]
     lines += [f"{k} = {json.dumps(v)}" for k, v in dataset.provenance.items()]
+    with open(target, "rb") as fh:  # a workbook, MATLAB or HDF5 file (whatever its name) is read as one
+        fmt = tables.detect_format(fh.read(4096), display(target))
+    lines += ["", "[read]", f'format = "{fmt}"'] if fmt != "csv" else []
     for c in dataset.columns:
         lines += ["", f"[columns.{json.dumps(c.header)}]", f"name = {json.dumps(c.name)}"]
         lines.append(f"unit = {json.dumps(c.unit)}" if c.unit else 'kind = "category"')
