@@ -21,6 +21,7 @@ from skinfit.apps.cli import main
 from skinfit.errors import InputError, InputTypeError, MissingDependency
 from skinfit.io.data import from_frame, load_dataset, write_card
 from skinfit.io.mapping import init_dataset
+from skinfit.io.tables import read_lab_table
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 MODEL = "electroadhesion_coulomb"  # covariates normal_force [N], voltage [V]; observable tangential_force [N]
@@ -148,6 +149,31 @@ def test_csv_separator_that_could_be_two_is_an_error(tmp_path):
     with pytest.raises(InputError, match=r"odd\.csv: sep, row 1: the separator could be ',' \(3 columns\) or ';' "
                                           r"\(2 columns\): give it"):
         init_dataset(path, MODEL, tmp_path / "ds")
+
+
+@pytest.mark.parametrize("encoding, bom, expected", [
+    ("utf-8", b"", "utf-8"), ("utf-8", b"\xef\xbb\xbf", "utf-8-sig"), ("cp1252", b"", "cp1252"),
+    ("latin-1", b"", "latin-1"),
+])
+def test_the_encoding_is_detected_and_the_text_read_as_written(encoding, bom, expected):
+    label = "Müller €" if encoding in ("utf-8", "cp1252") else "Müller µ"
+    raw = bom + f"subject;Fn (µN)\n{label};1,5\n".encode(encoding)
+    table = read_lab_table(raw, "x.csv")
+    assert table.read["encoding"] == expected and "encoding" in table.detected
+    assert table.headers == ("subject", "Fn (µN)") and list(table.cells["subject"]) == [label]
+    assert list(table.cells["Fn (µN)"]) == ["1.5"] and table.read["decimal"] == ","
+    assert list(table.rows) == [2]
+
+
+def test_a_title_line_above_the_header_is_named(tmp_path):
+    path = tmp_path / "titled.csv"
+    path.write_text("RigSoft export\nFn;Ft\n1;2\n")
+    with pytest.raises(InputError, match=r"titled\.csv: header, row 1: the first line has one field and the lines "
+                                          r"below 2 \(separated by ';'\): a title line above the header\?"):
+        init_dataset(path, MODEL, tmp_path / "ds")
+    with pytest.raises(InputError, match=r"titled\.csv: column 2, row 2: 2 fields where the header has 1 \(line 1, "
+                                          r"read as the header, has one field: a title line\?"):
+        init_dataset(path, MODEL, tmp_path / "ds", read={"sep": ";"})
 
 
 def test_unit_given_and_in_the_header_must_agree(lab, tmp_path):

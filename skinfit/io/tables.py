@@ -238,6 +238,13 @@ def _detect_sep(lines, where):
         shown = " or ".join(f"{'tab' if s == chr(9) else repr(s)} ({n} columns)" for s, n in even)
         raise InputError(where, f"the separator could be {shown}: give it (--sep, or sep in [read])",
                          field="sep", row=lines[0][0])
+    if not even and widest[0] == 1:  # the first line is one field whatever the separator: a title?
+        for sep in (",", ";", "\t"):
+            below = [len(f) for _, f in _records(lines[1:], sep, where, limit=200)]
+            if below and min(below) == max(below) >= 2:
+                raise InputError(where, f"the first line has one field and the lines below {below[0]} (separated by "
+                                 f"{'tab' if sep == chr(9) else repr(sep)}): a title line above the header? start it "
+                                 "with '#' or delete it", field="header", row=lines[0][0])
     return even[0][0] if even else widest[1]
 
 
@@ -265,6 +272,8 @@ def _read_csv(raw, where, read):
         if len(fields) != width:
             extra = (f"; field {width + 1} on is beyond the header (a decimal comma in a file separated by "
                      f"{sep!r}? give the separator and decimal mark)" if len(fields) > width else "")
+            if width == 1 and len(fields) > 1:
+                extra = f" (line {header_row}, read as the header, has one field: a title line? mark it a comment)"
             raise InputError(where, f"{len(fields)} fields where the header has {width}{extra}", row=no,
                              field=f"column {width + 1}" if len(fields) > width else f"column {len(fields) + 1}")
     if not body:
