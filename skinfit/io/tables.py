@@ -42,8 +42,6 @@ ENCODINGS = ("utf-8", "utf-8-sig", "latin-1", "cp1252")
 COMMENTS = "#%"
 
 _HDF5 = b"\x89HDF\r\n\x1a\n"
-_NUMBER_DOT = re.compile(r"^[+-]?(\d+\.\d*|\.\d+)([eE][+-]?\d+)?$")
-_NUMBER_COMMA = re.compile(r"^[+-]?(\d+,\d*|,\d+)([eE][+-]?\d+)?$")
 
 
 @dataclass(frozen=True)
@@ -301,15 +299,26 @@ def _check_header(header, where, row):
                              f"{j + 1}): which one is meant is ambiguous", field=f"column {h!r}", row=row)
 
 
+def _marks(column):
+    """Masks of a column's cells that are finite numbers written with a decimal point (``1.5``),
+    and with a decimal comma (``-0,25``, ``1,5e-3``); vectorised (numpy.strings, pandas)."""
+    arr = np.asarray(column, dtype=str)
+    dots, commas = np.strings.count(arr, "."), np.strings.count(arr, ",")
+    point, comma = (dots == 1) & (commas == 0), (commas == 1) & (dots == 0)
+    swapped = np.where(comma, np.strings.replace(arr, ",", "."), arr)
+    numeric = np.isfinite(pd.to_numeric(pd.Series(swapped, dtype=object), errors="coerce").to_numpy(dtype=float))
+    return point & numeric, comma & numeric
+
+
 def _detect_decimal(header, columns, rows, where):
     """``,`` when numbers are written only with a decimal comma, else ``.``; both in one file is
     ambiguous (``1.500`` may be a thousands mark): an error at the first cell breaking the mark
     of the cells above it, naming a cell of the other mark too."""
     first = {}
-    for mark, pattern in ((".", _NUMBER_DOT), (",", _NUMBER_COMMA)):
-        found = [(i, h, cell) for h, col in zip(header, columns) for i, cell in enumerate(col) if pattern.match(cell)]
-        if found:
-            first[mark] = min(found, key=lambda t: t[0])
+    for h, col in zip(header, columns):
+        for mark, mask in zip(".,", _marks(col)):
+            if mask.any() and (mark not in first or int(np.argmax(mask)) < first[mark][0]):
+                first[mark] = (int(np.argmax(mask)), h, col[int(np.argmax(mask))])
     if len(first) == 2:
         (i1, h1, c1), (i2, h2, c2) = sorted(first.values(), key=lambda t: t[0])
         raise InputError(where, f"{c2!r} is written with the other decimal mark than {c1!r} (column {h1!r}, row "
@@ -319,14 +328,12 @@ def _detect_decimal(header, columns, rows, where):
 
 
 def _comma_to_dot(header, column, rows, where):
-    out = []
-    for i, cell in enumerate(column):
-        if _NUMBER_DOT.match(cell):
-            raise InputError(where, f"{cell!r} has a decimal point in a file read with a decimal comma (a "
-                             "thousands mark?): write the number as the others are", field=f"column {header!r}",
-                             row=int(rows[i]))
-        out.append(cell.replace(",", ".") if _NUMBER_COMMA.match(cell) else cell)
-    return out
+    point, comma = _marks(column)
+    if point.any():
+        i = int(np.argmax(point))
+        raise InputError(where, f"{column[i]!r} has a decimal point in a file read with a decimal comma (a thousands "
+                         "mark?): write the number as the others are", field=f"column {header!r}", row=int(rows[i]))
+    return [c.replace(",", ".") if m else c for c, m in zip(column, comma)]
 
 
 def _cell_text(value):
