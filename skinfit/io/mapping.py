@@ -24,6 +24,7 @@ from pathlib import Path
 import pandas as pd
 
 from skinfit.errors import InputError, InputTypeError
+from skinfit.io.arguments import check_output_folder, check_path
 from skinfit.io.data import Column, Dataset, load_dataset, max_data_bytes, validate_table
 from skinfit.io.models import Model, check_id, load_model
 from skinfit.io.paths import display
@@ -227,7 +228,8 @@ def init_dataset(path, model: str | Model, out, *, columns: Mapping[str, str] | 
     ``read`` (others detected) and maps its headers (:func:`propose`).  Every value is checked
     before anything is written.  Returns ``(dataset, table, mapped, ignored)``."""
     model = model if isinstance(model, Model) else load_model(model)
-    path, out = Path(path), Path(out)
+    path = Path(check_path(path, "init_dataset", "path", "the path of a lab's table file"))
+    out = check_output_folder(out, "init_dataset", "out", "out names the dataset folder written")
     where = display(path)
     raw = read_regular(path, max_data_bytes(), "data file", where=where)
     table = read_lab_table(raw, where, check_read(dict(read or {}), "reading options", prefix=""))
