@@ -36,8 +36,10 @@ def _restore(cls, args, state):
 class InputError(Portable, ValueError):
     """A user file or argument is invalid.
 
-    The message names the file, the field or column, the row (1-based data row, header
-    excluded) when there is one, and what was expected, e.g.
+    The message names the file, the field or column, the row when there is one (1-based data
+    row, header excluded; in a lab's file read through a card's ``[read]`` options, the row as
+    the user sees the file: the line of a text file with header and comment lines counted, the
+    row of a sheet, the element of a MATLAB or HDF5 vector), and what was expected, e.g.
     ``datasets/x/data.csv: column 'normal_force', row 7: expected a force >= 0 (got -0.3 mN)``.
     """
 

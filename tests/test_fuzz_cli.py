@@ -32,7 +32,7 @@ from popdata import write_population
 from skinfit.apps.cli import build_parser, main
 
 MODEL, DATASET = "electroadhesion_coulomb", "electroadhesion_synthetic"
-ERROR_LINE = re.compile(r"^skinfit(?: [\w-]+)?: error: ")
+ERROR_LINE = re.compile(r"^skinfit(?: [\w-]+){0,2}: error: ")  # "skinfit dataset init: error: ..."
 
 
 class _WorkStarted(Exception):
@@ -70,6 +70,7 @@ def inputs(tmp_path_factory):
     os.mkfifo(root / "fifo")
     (root / "folder").mkdir()
     (root / "file.txt").write_text("x")
+    (root / "lab.csv").write_text("# rig export\nNormal force (mN);Ft;Voltage (V)\n200,5;90,25;0\n400;180,5;100\n")
     return root
 
 
@@ -83,7 +84,9 @@ def _base(cmd, root, out):
             "population": [str(root / "by"), "--out", str(out)],
             "sbc": [MODEL, "--n-sims", "2"],
             "demo": ["--out", str(out), "--dataset", DATASET],
-            "design": [MODEL, "--candidates", str(root / "grid.toml")]}[cmd]
+            "design": [MODEL, "--candidates", str(root / "grid.toml")],
+            "dataset init": [str(root / "lab.csv"), "--model", MODEL, "--out", str(out),
+                             "--column", "Ft=tangential_force:mN"]}[cmd]
 
 
 def _arguments():
@@ -91,7 +94,11 @@ def _arguments():
     parser = build_parser()
     subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     out = [(cmd, "--path", None) for cmd in ("models", "fit")]  # the global option
-    for cmd, sub in subs.choices.items():
+    commands = {}
+    for cmd, sub in subs.choices.items():  # a command of commands (dataset init): each of them
+        nested = next((a for a in sub._actions if isinstance(a, argparse._SubParsersAction)), None)
+        commands.update({f"{cmd} {c}": s for c, s in nested.choices.items()} if nested else {cmd: sub})
+    for cmd, sub in commands.items():
         positional = [a for a in sub._actions if not a.option_strings]
         for action in sub._actions:
             if isinstance(action, argparse._HelpAction) or action.nargs == 0:
@@ -105,7 +112,7 @@ def _arguments():
 ARGUMENTS = _arguments()
 NUMBER_TYPES = {"parse", "_positive_float", "int", "float"}
 #: dests that name a file or folder skinfit reads, and folders it writes
-INPUTS = {"model", "dataset", "runs", "campaign", "candidates", "from_fit", "priors", "baseline", "run"}
+INPUTS = {"model", "dataset", "runs", "campaign", "candidates", "from_fit", "priors", "baseline", "run", "file"}
 FOLDERS = {"out", "report"}
 
 
@@ -146,7 +153,7 @@ def _never_valid(kind, value):
 def _argv(cmd, key, value, root, out):
     argv = list(_base(cmd, root, out))
     if key == "--path":
-        return ["--path", value, cmd, *argv]
+        return ["--path", value, *cmd.split(), *argv]
     if isinstance(key, int):
         positional = [i for i, a in enumerate(argv)
                       if not a.startswith("--") and (i == 0 or not argv[i - 1].startswith("--"))]
@@ -158,7 +165,7 @@ def _argv(cmd, key, value, root, out):
         argv[argv.index(key) + 1] = value
     else:
         argv += [key, value]
-    return [cmd, *argv]
+    return [*cmd.split(), *argv]
 
 
 @contextlib.contextmanager

@@ -96,7 +96,8 @@ class Run:
 
 def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         priors: str | os.PathLike | PriorSet | None = None, *, units: Mapping[str, str] | None = None,
-        rng: int | np.random.Generator | None = None, split: Mapping[str, Sequence[str]] | None = None,
+        columns: Mapping[str, str] | None = None, rng: int | np.random.Generator | None = None,
+        split: Mapping[str, Sequence[str]] | None = None,
         noise: str | Mapping[str, str] | None = None, constants: Mapping[str, float] | None = None,
         nwalkers: int | None = None, ess_target: float = 400, max_steps: int = 20000, progress: bool = False,
         n_global: int = 2000, n_local: int = 4, n_prior_draws: int = 2000,
@@ -121,7 +122,8 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     if checkpoint is not None:
         checkpoint = check_output_file(checkpoint, "fit", "checkpoint", "checkpoint")
     check_mapping(units, "fit", "units", "a mapping column -> unit")
-    model, dataset, priors = resolve_inputs(model, dataset, priors, units=units)
+    check_mapping(columns, "fit", "columns", "a mapping header -> skinfit name")
+    model, dataset, priors = resolve_inputs(model, dataset, priors, units=units, columns=columns)
     inputs = input_record(model, priors, dataset)  # the files read, and any they hid: said now, not after sampling
     warn_shadows(inputs, model, priors)
     seed_drawn = rng is None
@@ -174,12 +176,12 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
                         "sampling_s": sampler.seconds, "resumed": saved is not None})
 
 
-def resolve_inputs(model, dataset, priors=None, *, units=None):
+def resolve_inputs(model, dataset, priors=None, *, units=None, columns=None):
     """The Model, Dataset and PriorSet :func:`run` fits, from what it accepts: ids, paths or
     loaded objects; the priors default to the model's prior file. Loaded objects pass through,
     so a caller that resolves them first (to check them) loads nothing twice."""
     model = model if isinstance(model, Model) else load_model(model)
-    dataset = as_dataset(dataset, model=model, units=units)
+    dataset = as_dataset(dataset, model=model, units=units, columns=columns)
     if not (priors is None or isinstance(priors, PriorSet)):
         check_path(priors, "priors", None, "a PriorSet, a prior file id or the path of a prior file")
     priors = priors if isinstance(priors, PriorSet) else load_priors(model.id if priors is None else priors)

@@ -19,7 +19,7 @@ from skinfit.errors import InputError, InputTypeError
 
 __all__ = ["file_kind", "check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path",
            "check_input_file", "check_output_file", "check_output_folder", "check_memory", "check_mapping",
-           "available_memory", "size_text"]
+           "available_memory", "size_text", "frame_type_error"]
 
 
 def shown(value, limit=60):
@@ -204,3 +204,19 @@ def check_memory(nbytes, where, name, what, *, fix, available=None):
     if nbytes > available:
         raise InputError(where, f"{what} would need {size_text(nbytes)}, more than the {size_text(available)} of "
                                 f"memory available: {fix}", field=name)
+
+
+def frame_type_error(value, where, name=None):
+    """The InputTypeError for a table given as something other than a DataFrame, saying what to
+    pass instead (a dict, a numpy array, an xarray Dataset are common)."""
+    kind = type(value)
+    if kind.__module__.startswith("xarray") and hasattr(value, "to_dataframe"):
+        hint = "pass a pandas DataFrame: ds.to_dataframe().reset_index()"
+    elif isinstance(value, Mapping):
+        hint = "pass a pandas DataFrame: pd.DataFrame(d)"
+    elif kind.__module__ == "numpy" and kind.__name__ == "ndarray":
+        hint = "pass a pandas DataFrame with named columns: pd.DataFrame(a, columns=[...])"
+    else:
+        hint = "pass a pandas DataFrame"
+    shown = kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__.split('.')[0]}.{kind.__name__}"
+    return InputTypeError(where, f"got a {shown}: {hint}", field=name)

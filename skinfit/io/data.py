@@ -11,9 +11,7 @@ read, up to ``$SKINFIT_MAX_DATA_MB``.
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import json
 import os
 import re
@@ -26,15 +24,16 @@ from types import MappingProxyType
 import numpy as np
 import pandas as pd
 
-from skinfit.errors import InputError
-from skinfit.io.arguments import check_path
+from skinfit.errors import InputError, InputTypeError
+from skinfit.io import tables
+from skinfit.io.arguments import check_path, frame_type_error
 from skinfit.io.models import Model, check_id, load_model
 from skinfit.io.paths import display
 from skinfit.io.toml import available, find_file, read_regular, read_toml, require
 from skinfit.io.units import NONNEGATIVE, parse_unit
 
-__all__ = ["Dataset", "load_dataset", "list_datasets", "from_frame", "as_dataset", "check_units", "write_card",
-           "PROVENANCE_KINDS"]
+__all__ = ["Dataset", "Column", "load_dataset", "list_datasets", "from_frame", "as_dataset", "check_units",
+           "write_card", "validate_table", "max_data_bytes", "PROVENANCE_KINDS"]
 
 PROVENANCE_KINDS = ("measured", "digitised", "simulated")
 
@@ -104,9 +103,10 @@ class Dataset:
 
     @classmethod
     def from_frame(cls, frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
-                   model: str | Model | None = None, id: str = "frame", title: str = "") -> Dataset:
+                   columns: Mapping[str, str] | None = None, model: str | Model | None = None, id: str = "frame",
+                   title: str = "") -> Dataset:
         """A Dataset from a pandas DataFrame: see :func:`skinfit.io.data.from_frame`."""
-        return from_frame(frame, units=units, model=model, id=id, title=title)
+        return from_frame(frame, units=units, columns=columns, model=model, id=id, title=title)
 
     def __len__(self):
         return len(self.frame)
@@ -118,11 +118,15 @@ class Dataset:
 def _columns(doc, where):
     table = require(doc, "columns", dict, where)
     cols = []
-    for header, spec in table.items():
-        prefix = f"columns.{header}."
+    for key, spec in table.items():
+        prefix = f"columns.{key}."
         if not isinstance(spec, dict):
             raise InputError(where, "expected a table (unit = ..., or kind = \"category\")",
-                             field=f"columns.{header}")
+                             field=f"columns.{key}")
+        header = require(spec, "from", str, where, field_prefix=prefix, default=key)
+        if "from" in spec and "name" in spec:
+            raise InputError(where, "give the file's header as `from` and the skinfit name as the key, not also "
+                             "`name`", field=prefix + "name")
         kind = require(spec, "kind", str, where, field_prefix=prefix, default="quantity")
         if kind not in ("quantity", "category"):
             raise InputError(where, f"expected kind 'quantity' or 'category' (got {kind!r})",
@@ -131,7 +135,7 @@ def _columns(doc, where):
         if kind == "quantity":
             unit = require(spec, "unit", str, where, field_prefix=prefix)
             _unit(unit, where, prefix + "unit")
-        cols.append(Column(header, require(spec, "name", str, where, field_prefix=prefix, default=header),
+        cols.append(Column(header, require(spec, "name", str, where, field_prefix=prefix, default=key),
                            unit, kind, require(spec, "optional", bool, where, field_prefix=prefix, default=False),
                            require(spec, "signed", bool, where, field_prefix=prefix, default=False),
                            _missing_when(spec, where, prefix, table), _allowed(spec, where, prefix),
@@ -177,7 +181,8 @@ def _missing_when(spec, where, prefix, table):
     if column not in table:
         raise InputError(where, f"names column {column!r}, which is not declared under [columns]",
                          field=prefix + "missing_when.column")
-    return (column, equals)
+    other = table[column]
+    return (other.get("from", column) if isinstance(other, dict) else column, equals)
 
 
 def max_data_bytes():
@@ -190,19 +195,24 @@ def max_data_bytes():
                          f"{os.environ['SKINFIT_MAX_DATA_MB']!r})") from None
 
 
-def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
-                 units: Mapping[str, str] | None = None, max_bytes: int | None = None) -> Dataset:
-    """Load a dataset by id (``datasets/<id>/``), by the path of its folder or card, or from a
-    CSV file whose header gives the units (``normal_force [mN], voltage [V], ...``).
+def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None, units: Mapping[str, str] | None = None,
+                 columns: Mapping[str, str] | None = None, max_bytes: int | None = None) -> Dataset:
+    """Load a dataset by id (``datasets/<id>/``), by the path of its folder or card (one written
+    by ``skinfit dataset init`` reads a lab's file through its ``[read]`` options and column
+    map), or from a table file without a card whose header gives the units (``normal_force [mN],
+    voltage [V], ...``; a CSV, or an Excel, MATLAB or HDF5 file).
 
-    ``model`` (a Model or id) and ``units`` (column -> unit, for headers without one) serve a
-    CSV without a card: the model says which columns are quantities, and their units are checked
-    against its card.  A card's data ``file`` must lie inside the card's folder.
+    ``model`` (a Model or id), ``units`` (column -> unit, for headers without one) and
+    ``columns`` (header -> skinfit name) serve a file without a card: the model says which
+    columns are quantities, and their units are checked against its card.  A card's data
+    ``file`` must lie inside the card's folder.
     """
     max_bytes = max_data_bytes() if max_bytes is None else max_bytes
     p = Path(check_path(name, "load_dataset", None, "a dataset id, its folder or card, or a CSV file"))
     if p.suffix.lower() in (".csv", ".txt") or (p.exists() and not p.is_dir() and p.suffix != ".toml"):
-        return _load_csv(p, model=model, units=units, max_bytes=max_bytes)
+        return _load_csv(p, model=model, units=units, columns=columns, max_bytes=max_bytes)
+    if columns:
+        raise InputError(display(p), "columns= applies to a file without a card (a card maps its columns)")
     card = find_file("datasets", name)
     doc, text = read_toml(card)
     where = display(card)
@@ -228,7 +238,12 @@ def load_dataset(name: str | os.PathLike, *, model: str | Model | None = None,
     if recorded is not None and recorded != hashlib.sha256(raw).hexdigest():
         raise InputError(where, f"{data_path.name} is not the file this card was written for (its sha256 "
                          f"differs from the one recorded)", field="provenance.sha256")
-    frame = read_table(raw, columns, display(data_path))
+    read = require(doc, "read", dict, where, default=None)
+    if read is None:
+        frame = read_table(raw, columns, display(data_path))
+    else:  # a lab's file as exported, read with the card's options (skinfit dataset init)
+        lab = tables.read_lab_table(raw, display(data_path), tables.check_read(read, where))
+        frame = validate_table(lab.cells, columns, display(data_path), rows=lab.rows)
     digest = hashlib.sha256(text.encode() + b"\0" + raw).hexdigest()
     ds = Dataset(id=check_id(require(doc, "id", str, where, default=card.parent.name), where),
                  title=require(doc, "title", str, where, default=""), frame=frame,
@@ -255,26 +270,22 @@ def _data_file(card, file, where):
     return path
 
 
-_HEADER = re.compile(r"^(?P<name>[^\[\]]*?)\s*\[(?P<unit>[^\[\]]*)\]\s*$")
-
-
-def split_header(header):
-    """``"normal_force [mN]"`` -> ``("normal_force", "mN")``; ``"subject"`` -> ``("subject", None)``."""
-    m = _HEADER.match(header)
-    return (m.group("name").strip(), m.group("unit").strip()) if m else (header.strip(), None)
-
-
-def _columns_from_header(headers, where, model, units):
-    """Columns of a CSV without a card: units from ``name [unit]`` headers or ``units``; columns
-    without a unit are categories, except the model's covariates and observables (an error)."""
-    units = dict(units or {})
+def _columns_from_header(headers, where, model, units, columns=None, file_units=None):
+    """Columns of a table without a card: units from ``name [unit]`` headers, ``units``
+    (header or name -> unit) or the file (``file_units``, header -> unit); ``columns`` (header ->
+    skinfit name) renames headers, whose ``(unit)`` is then read too.  Columns without a unit are
+    categories, except the model's covariates and observables (an error)."""
+    units, columns, file_units = dict(units or {}), dict(columns or {}), dict(file_units or {})
     quantities = set()
     if model is not None:
         quantities = {q.name for q in (*model.covariates, *model.observables)}
     cols, used = [], set()
     for h in headers:
-        name, unit = split_header(h)
-        for key in (h, name):
+        name, unit = tables.split_unit(h) if h in columns else tables.split_header(h)
+        name = columns.get(h, name)
+        if h in file_units and unit is None:
+            unit = file_units[h]
+        for key in dict.fromkeys((h, name)):
             if key in units:
                 if unit is not None and units[key] != unit:
                     raise InputError(where, f"the header says [{unit}] and units= says {units[key]!r}: "
@@ -299,9 +310,33 @@ def _columns_from_header(headers, where, model, units):
         if missing:
             raise InputError(where, f"model {model.id!r} needs a column {missing[0]!r} "
                              f"[{_example_unit(model, missing[0])}] (the file has "
-                             f"{', '.join(_quote_headers(headers))})", field=f"column {missing[0]!r}")
+                             f"{', '.join(tables.quote_headers(headers))}; map a header to it with columns=, or for a "
+                             "file with skinfit dataset init --column)", field=f"column {missing[0]!r}")
     _unique_names(cols, where)
     return tuple(cols)
+
+
+def _check_columns(columns, headers, where):
+    """``columns=`` (header -> skinfit name) checked: headers the table has, names skinfit can
+    hold, no name given twice."""
+    if columns is None:
+        return {}
+    if not isinstance(columns, Mapping):
+        raise InputTypeError(where, f"expected a mapping header -> skinfit name (got {type(columns).__name__})",
+                             field="columns")
+    seen = {}
+    for h, name in columns.items():
+        if h not in headers:
+            raise InputError(where, f"columns= names a header the table does not have (it has "
+                             f"{', '.join(tables.quote_headers(list(headers)))})", field=f"column {h!r}")
+        if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+            raise InputError(where, f"expected a skinfit name such as 'normal_force' (got {name!r})",
+                             field=f"columns[{h!r}]")
+        if name in seen:
+            raise InputError(where, f"columns= maps {seen[name]!r} and {h!r} both to {name!r} (one column each)",
+                             field=f"column {h!r}")
+        seen[name] = h
+    return dict(columns)
 
 
 def _example_unit(model, name):
@@ -314,14 +349,21 @@ def _as_model(model):
     return load_model(model)
 
 
-def _load_csv(path, *, model=None, units=None, max_bytes=None):
-    """A dataset from a CSV file with units in its header and no card."""
+def _load_csv(path, *, model=None, units=None, columns=None, max_bytes=None):
+    """A dataset from a table file without a card: a CSV with units in its header (``name
+    [unit]``), or an Excel, MATLAB or HDF5 file whose column names are skinfit's."""
     model = _as_model(model)
     where = display(path)
     raw = read_regular(path, max_data_bytes() if max_bytes is None else max_bytes, "data file", where=where)
-    headers, _ = _split_csv(raw, where)
-    columns = _columns_from_header(headers, where, model, units)
-    frame = read_table(raw, columns, where)
+    if tables.detect_format(raw, where) == "csv":
+        headers, _ = tables.split_csv(raw, where)
+        columns = _columns_from_header(headers, where, model, units, _check_columns(columns, headers, where))
+        frame = read_table(raw, columns, where)
+    else:  # read with the libraries made for the format (skinfit.io.tables)
+        lab = tables.read_lab_table(raw, where)
+        columns = _columns_from_header(lab.headers, where, model, units, _check_columns(columns, lab.headers, where),
+                                       file_units=lab.units)
+        frame = validate_table(lab.cells, columns, where, rows=lab.rows)
     sha = hashlib.sha256(raw).hexdigest()
     provenance = {"kind": "measured", "note": "read from a CSV without a dataset card (kind assumed)",
                   "source_file": str(Path(path).resolve()), "sha256": sha}
@@ -338,11 +380,14 @@ def _load_csv(path, *, model=None, units=None, max_bytes=None):
 
 
 def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
-               model: str | Model | None = None, id: str = "frame", title: str = "") -> Dataset:
+               columns: Mapping[str, str] | None = None, model: str | Model | None = None, id: str = "frame",
+               title: str = "") -> Dataset:
     """A Dataset from a pandas DataFrame, validated as a CSV is: column names may carry their
-    unit (``"normal_force [mN]"``) or ``units`` gives it (column -> unit); values converted to SI."""
+    unit (``"normal_force [mN]"``), ``columns`` maps a header to a skinfit name (``{"Normal force
+    (mN)": "normal_force"}``, the ``(mN)`` then read as its unit), ``units`` gives a unit (header
+    or skinfit name -> unit); values converted to SI."""
     if not isinstance(frame, pd.DataFrame):
-        raise InputError("DataFrame", f"expected a pandas DataFrame (got {type(frame).__name__})")
+        raise frame_type_error(frame, "DataFrame")
     model = _as_model(model)
     where = f"DataFrame {id!r}"
     check_id(id, where, field="id")
@@ -352,7 +397,7 @@ def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
         raise InputError(where, "column name appears twice", field=f"column {dup!r}")
     if len(frame) == 0:
         raise InputError(where, "no data rows")
-    columns = _columns_from_header(headers, where, model, units)
+    cols = _columns_from_header(headers, where, model, units, _check_columns(columns, headers, where))
     table = {}
     for h, (_, col) in zip(headers, frame.items()):
         if pd.api.types.is_numeric_dtype(col.dtype) and not pd.api.types.is_bool_dtype(col.dtype):
@@ -361,13 +406,13 @@ def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
         else:
             table[h] = pd.Series(["" if v is None or (isinstance(v, float) and np.isnan(v)) else str(v)
                                   for v in col.to_numpy(dtype=object)], dtype=object)
-    out = _validate(pd.DataFrame(table), columns, where)
-    h = hashlib.sha256(json.dumps([[c.header, c.name, c.unit] for c in columns]).encode())
+    out = validate_table(pd.DataFrame(table), cols, where)
+    h = hashlib.sha256(json.dumps([[c.header, c.name, c.unit] for c in cols]).encode())
     for name in out.columns:
         h.update(name.encode() + b"\0" + (out[name].to_numpy().tobytes() if out[name].dtype.kind == "f"
                                            else "\0".join(map(str, out[name])).encode()))
-    ds = Dataset(id=id, title=title, frame=out, columns=columns,
-                 groups=tuple(c.name for c in columns if c.kind == "category"),
+    ds = Dataset(id=id, title=title, frame=out, columns=cols,
+                 groups=tuple(c.name for c in cols if c.kind == "category"),
                  provenance=MappingProxyType({"kind": "measured", "note": "from a pandas DataFrame"}),
                  model=getattr(model, "id", None), path=where, sha256=h.hexdigest())
     if model is not None:
@@ -375,18 +420,21 @@ def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
     return ds
 
 
-def as_dataset(data, model=None, units=None):
+def as_dataset(data, model=None, units=None, columns=None):
     """A Dataset from a Dataset, a DataFrame, a CSV path, a dataset id or card path."""
     if isinstance(data, Dataset):
-        if units:
-            raise InputError("units", "units= applies to a DataFrame or a CSV, not to a loaded Dataset")
+        if units or columns:
+            raise InputError("units" if units else "columns", "applies to a DataFrame or a file without a card, "
+                             "not to a loaded Dataset")
         return data
     if isinstance(data, pd.DataFrame):
-        return from_frame(data, units=units, model=model)
+        return from_frame(data, units=units, columns=columns, model=model)
+    if isinstance(data, (Mapping, np.ndarray)) or type(data).__module__.startswith("xarray"):
+        raise frame_type_error(data, "dataset")
     check_path(data, "dataset", None, "a Dataset, a pandas DataFrame, a dataset id, its folder or card, or a CSV file")
     if units and Path(data).suffix.lower() not in (".csv", ".txt"):
         raise InputError("units", "units= applies to a DataFrame or a CSV; a dataset card states its units")
-    return load_dataset(data, model=model, units=units)
+    return load_dataset(data, model=model, units=units, columns=columns)
 
 
 def check_units(dataset, model):
@@ -430,6 +478,9 @@ def write_card(dataset, folder, data_name="data.csv"):
     lines += [f"file = {json.dumps(data_name)}", f"groups = {json.dumps(list(dataset.groups))}", "",
               "[provenance]"]
     lines += [f"{k} = {json.dumps(v)}" for k, v in dataset.provenance.items()]
+    with open(target, "rb") as fh:  # a workbook, MATLAB or HDF5 file (whatever its name) is read as one
+        fmt = tables.detect_format(fh.read(4096), display(target))
+    lines += ["", "[read]", f'format = "{fmt}"'] if fmt != "csv" else []
     for c in dataset.columns:
         lines += ["", f"[columns.{json.dumps(c.header)}]", f"name = {json.dumps(c.name)}"]
         lines.append(f"unit = {json.dumps(c.unit)}" if c.unit else 'kind = "category"')
@@ -438,68 +489,26 @@ def write_card(dataset, folder, data_name="data.csv"):
     return path
 
 
-def _quote_headers(headers):
-    """Header cells as they may appear in a message: names only (never a line of some other file)."""
-    ok = [h for h in headers if re.fullmatch(r"[\w .,+\-/*^()\[\]%µμ]{1,48}", h)]
-    return [repr(h) for h in ok] if len(ok) == len(headers) else [f"{len(headers)} header fields"]
-
-
-def _split_csv(raw, where):
-    """Header and rows of CSV bytes; every row must have exactly the header's fields."""
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(where, f"not UTF-8 text (invalid byte at offset {exc.start})") from None
-    if "\0" in text:
-        raise InputError(where, "holds NUL bytes: not a text (CSV) file")
-    try:
-        rows = [r for r in csv.reader(io.StringIO(text, newline=""), skipinitialspace=True) if r]
-    except csv.Error as exc:
-        raise InputError(where, f"not a readable CSV file ({exc})") from None
-    if not rows:
-        raise InputError(where, "the file is empty (expected a header row and data rows)")
-    header = [h.strip() for h in rows[0]]
-    for j, h in enumerate(header):
-        if not h:
-            raise InputError(where, f"header field {j + 1} is empty (every column needs a name)", field="header")
-        if header.index(h) != j:
-            raise InputError(where, f"the header names this column twice (fields {header.index(h) + 1} and "
-                             f"{j + 1}): which one is meant is ambiguous", field=f"column {h!r}")
-    names = [split_header(h)[0] for h in header]
-    for j, h in enumerate(names):
-        if names.index(h) != j:
-            raise InputError(where, f"two header fields name column {h!r} ({header[names.index(h)]!r} and "
-                             f"{header[j]!r}): which one is meant is ambiguous", field=f"column {h!r}")
-    n = len(header)
-    for i, r in enumerate(rows[1:]):
-        if len(r) != n:
-            extra = (f"; field {n + 1} on is beyond the header (a decimal comma in a comma-separated file? "
-                     "write 0.5, not 0,5, or quote the value)" if len(r) > n else "")
-            raise InputError(where, f"{len(r)} fields where the header has {n}{extra}", row=i + 1,
-                             field=f"column {n + 1}" if len(r) > n else f"column {len(r) + 1}")
-    return header, rows[1:]
-
-
 def read_table(raw, columns, where):
     """Parse CSV bytes against the declared columns; returns the SI frame."""
-    header, rows = _split_csv(raw, where)
+    header, rows = tables.split_csv(raw, where)
     if not rows:
         raise InputError(where, "no data rows (expected at least one row below the header)")
     table = pd.DataFrame({h: pd.Series(v, dtype=object) for h, v in zip(header, zip(*rows))})
-    return _validate(table, columns, where)
+    return validate_table(table, columns, where)
 
 
 def _match(columns, table, where):
     """CSV header of each declared column: the card's key equals the header, or its name part
     (``normal_force`` matches ``normal_force [mN]``, whose unit must then agree with the card's)."""
-    names = {split_header(h)[0]: h for h in table.columns}
+    names = {tables.split_header(h)[0]: h for h in table.columns}
     out = {}
     for col in columns:
         h = col.header if col.header in table.columns else names.get(col.header)
         if h is None:
             raise InputError(where, f"missing column (the card declares it; the file has "
-                             f"{', '.join(_quote_headers(list(table.columns)))})", field=f"column {col.header!r}")
-        unit = split_header(h)[1]
+                             f"{', '.join(tables.quote_headers(list(table.columns)))})", field=f"column {col.header!r}")
+        unit = tables.split_header(h)[1]
         if unit is not None and col.unit is not None and h != col.header and unit != col.unit:
             raise InputError(where, f"the header says [{unit}], the card says {col.unit!r}: which is meant "
                              "is ambiguous", field=f"column {h!r}")
@@ -511,9 +520,16 @@ def _shown(text):
     return repr(text if len(text) <= 24 else text[:21] + "...")
 
 
-def _validate(table, columns, where):
-    """Check each declared column of a table of strings (as read) and convert it to SI."""
+def validate_table(table, columns, where, *, rows=None):
+    """Check each declared column of ``table`` (a DataFrame of cell texts, as read) and convert
+    it to SI; returns the frame of skinfit names.  ``rows`` ((n,) int) numbers the rows in
+    messages as the user sees the file (default: 1-based data rows)."""
     headers = _match(columns, table, where)
+    numbers = np.arange(1, len(table) + 1) if rows is None else np.asarray(rows)
+
+    def row(i):
+        return int(numbers[i])
+
     out = {}
     for col in columns:
         text = table[headers[col.header]].astype(str).str.strip()
@@ -522,7 +538,7 @@ def _validate(table, columns, where):
         if col.kind == "category":
             if blank.any() and not col.optional:
                 raise InputError(where, "empty group label (expected a name for every row)",
-                                 field=field, row=int(np.argmax(blank.to_numpy())) + 1)
+                                 field=field, row=row(int(np.argmax(blank.to_numpy()))))
             out[col.name] = text.astype(object)
             continue
         unit = parse_unit(col.unit)
@@ -531,7 +547,7 @@ def _validate(table, columns, where):
         if bad.any():
             i = int(np.argmax(bad))
             raise InputError(where, f"expected a number in {col.unit} (got {_shown(text.iloc[i])})",
-                             field=field, row=i + 1)
+                             field=field, row=row(i))
         if col.missing_when:
             other, label = col.missing_when
             if other not in headers:
@@ -541,35 +557,35 @@ def _validate(table, columns, where):
             if (absent & ~by_design).any():
                 i = int(np.argmax(absent & ~by_design))
                 raise InputError(where, f"missing value (expected a number in {col.unit}; only rows with "
-                                 f"{other} = {label!r} leave it empty by design)", field=field, row=i + 1)
+                                 f"{other} = {label!r} leave it empty by design)", field=field, row=row(i))
             if (~absent & by_design).any():
                 i = int(np.argmax(~absent & by_design))
                 raise InputError(where, f"expected no value on a row with {other} = {label!r} (missing "
-                                 f"by design; got {_shown(text.iloc[i])})", field=field, row=i + 1)
+                                 f"by design; got {_shown(text.iloc[i])})", field=field, row=row(i))
         elif np.isnan(values).any() and not col.optional:
             i = int(np.argmax(np.isnan(values)))
             raise InputError(where, f"missing value (expected a number in {col.unit}; declare "
-                             f"`optional = true` if it is missing by design)", field=field, row=i + 1)
+                             f"`optional = true` if it is missing by design)", field=field, row=row(i))
         if np.isinf(values).any():
             i = int(np.argmax(np.isinf(values)))
-            raise InputError(where, f"expected a finite number (got {_shown(text.iloc[i])})", field=field, row=i + 1)
+            raise InputError(where, f"expected a finite number (got {_shown(text.iloc[i])})", field=field, row=row(i))
         dim = unit.name
         if dim in NONNEGATIVE and not col.signed and (values < 0).any():
             i = int(np.argmax(values < 0))
             raise InputError(where, f"expected a {dim} >= 0 (got {values[i]:g} {col.unit}; declare "
-                             f"`signed = true` if negative values are meaningful)", field=field, row=i + 1)
+                             f"`signed = true` if negative values are meaningful)", field=field, row=row(i))
         present = ~np.isnan(values)
         if col.positive and (present & (values <= 0)).any():
             i = int(np.argmax(present & (values <= 0)))
-            raise InputError(where, f"expected a value > 0 (got {values[i]:g} {col.unit})", field=field, row=i + 1)
+            raise InputError(where, f"expected a value > 0 (got {values[i]:g} {col.unit})", field=field, row=row(i))
         if col.allowed and (present & ~np.isin(values, col.allowed)).any():
             i = int(np.argmax(present & ~np.isin(values, col.allowed)))
             raise InputError(where, f"expected one of {', '.join(f'{v:g}' for v in col.allowed)} "
-                             f"(got {_shown(text.iloc[i])})", field=field, row=i + 1)
+                             f"(got {_shown(text.iloc[i])})", field=field, row=row(i))
         si = values * unit.factor
         if not np.isfinite(si[present]).all():
             i = int(np.argmax(present & ~np.isfinite(si)))
-            raise InputError(where, f"{text.iloc[i]} {col.unit} overflows in SI units", field=field, row=i + 1)
+            raise InputError(where, f"{text.iloc[i]} {col.unit} overflows in SI units", field=field, row=row(i))
         out[col.name] = si
     return pd.DataFrame(out)
 

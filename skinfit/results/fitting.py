@@ -30,7 +30,8 @@ __all__ = ["fit"]
 
 def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         priors: str | os.PathLike | PriorSet | None = None, *, units: Mapping[str, str] | None = None,
-        rng: int | np.random.Generator | None = None, split: Mapping[str, Sequence[str]] | None = None,
+        columns: Mapping[str, str] | None = None, rng: int | np.random.Generator | None = None,
+        split: Mapping[str, Sequence[str]] | None = None,
         noise: str | Mapping[str, str] | None = None, constants: Mapping[str, float] | None = None,
         nwalkers: int | None = None, ess_target: float = 400, max_steps: int = 20000, progress: bool = False,
         strict: bool = False, n_global: int = 2000, n_local: int = 4, n_prior_draws: int = 2000,
@@ -47,6 +48,10 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         (``normal_force [mN]``), or a DataFrame (:func:`skinfit.io.data.from_frame`).
     units : mapping column -> unit, optional
         Units of DataFrame or CSV columns whose name does not carry one (``{"voltage": "V"}``).
+    columns : mapping header -> skinfit name, optional
+        For a DataFrame with a lab's headers: ``{"Normal force (mN)": "normal_force"}`` (a
+        header's ``(unit)`` or ``[unit]`` is read as its unit).  A file is mapped once, into a
+        dataset card: ``skinfit dataset init`` (docs: "Your lab's files").
     priors : PriorSet or str, optional
         Default: ``priors/<model id>.toml``.
     rng : int, None or numpy.random.Generator
@@ -94,7 +99,8 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
     """
     t_start = time.perf_counter()
     strict, complete = check_flag(strict, "fit", "strict"), check_flag(complete, "fit", "complete")
-    result = run(model, dataset, priors, units=units, rng=rng, split=split, noise=noise, constants=constants,
+    result = run(model, dataset, priors, units=units, columns=columns, rng=rng, split=split, noise=noise,
+                 constants=constants,
                  nwalkers=nwalkers, ess_target=ess_target, max_steps=max_steps, progress=progress,
                  n_global=n_global, n_local=n_local, n_prior_draws=n_prior_draws, checkpoint=checkpoint,
                  resume=resume, checkpoint_every=checkpoint_every)

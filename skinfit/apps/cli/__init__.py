@@ -61,6 +61,15 @@ def one_line(message):
     return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in str(message))
 
 
+def _comment(value):
+    """argparse type of --comment: '#', '%', both, or 'none' (no comment lines)."""
+    if value == "none":
+        return ""
+    if not value or not set(value) <= set("#%"):
+        raise argparse.ArgumentTypeError(f"expected '#', '%', '#%' or 'none' (got {value!r})")
+    return value
+
+
 def _text(value):
     """argparse type of an argument without one: any text but a blank one (an empty ``--from ""``
     was taken for no ``--from``, an empty ``--out ""`` for the current folder)."""
@@ -116,6 +125,31 @@ def build_parser():
     s.add_argument("--json", action="store_true")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each dataset is from")
     s.set_defaults(func=_command("skinfit.apps.cli.datasets"))
+    s = sub.add_parser("dataset", help="write a dataset card for a lab's file: skinfit dataset init FILE --model M")
+    d = s.add_subparsers(dest="action", required=True)
+    s = d.add_parser("init", help="map a lab table's headers (CSV, .xlsx, .mat, .h5) to a model's names and write "
+                                  "a dataset folder that `skinfit fit MODEL DIR` reads, the file unchanged")
+    s.add_argument("file", help="the table as the lab's software exported it")
+    s.add_argument("--model", required=True, help="model id or path: its covariates and observables are mapped")
+    s.add_argument("--out", required=True, help="dataset folder written: dataset.toml and a copy of FILE")
+    s.add_argument("--column", action="append", metavar="HEADER=NAME[:UNIT]",
+                   help='map a header to a skinfit name, with its unit if the header has none (repeatable), '
+                        'e.g. --column "Ft=tangential_force:mN"')
+    s.add_argument("--sep", choices=[",", ";", "tab"], help="CSV separator (default: detected)")
+    s.add_argument("--decimal", choices=[".", ","], help="CSV decimal mark (default: detected)")
+    s.add_argument("--comment", type=_comment, help="characters starting a comment line, '#', '%%', '#%%' or "
+                   "'none' (default: detected)")
+    s.add_argument("--encoding", choices=["utf-8", "utf-8-sig", "latin-1", "cp1252"],
+                   help="CSV encoding (default: detected)")
+    s.add_argument("--sheet", help="Excel sheet (default: the one sheet with data)")
+    s.add_argument("--variable", help="MATLAB struct or HDF5 group holding the table, '/' for the top level "
+                                      "(default: the one there is)")
+    s.add_argument("--id", help="dataset id (default: from the file name)")
+    s.add_argument("--kind", choices=["measured", "digitised"], default="measured",
+                   help="provenance of the data (default measured)")
+    s.add_argument("--overwrite", action="store_true", help="replace a card already in --out")
+    s.add_argument("--json", action="store_true", help="print the mapping as JSON")
+    s.set_defaults(func=_command("skinfit.apps.cli.dataset"))
     s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
     s.add_argument("model", help="model id (models/<id>.toml) or path")
     s.add_argument("dataset", help="dataset id (datasets/<id>/), its folder or card, or a CSV file with units "
