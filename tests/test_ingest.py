@@ -2,6 +2,8 @@
 issue's rig file, written as MATLAB v5, v7.3 and HDF5; strokes counted, stroke means checked
 against the generating values within their reported standard errors, off-target trials rejected."""
 
+import hashlib
+
 import h5py
 import numpy as np
 import pytest
@@ -9,6 +11,7 @@ import scipy.io
 from recordings import ISSUE_RIG, rig_volts, stroke_recording, write_mat_v73
 
 import skinfit
+from skinfit.apps.cli import main
 from skinfit.errors import InputError
 from skinfit.io.recordings.ingest import run_ingest
 from skinfit.io.recordings.rig import load_rig
@@ -106,8 +109,6 @@ def test_dataset_card_records_inputs(tmp_path):
     ds = skinfit.ingest(files, rig, out=tmp_path / "out")
     assert {"normal_force_se", "tangential_force_se", "n_eff", "speed", "direction"} <= set(ds.frame.columns)
     p = ds.provenance
-    import hashlib
-
     assert p["raw_sha256"] == [hashlib.sha256(f.read_bytes()).hexdigest() for f in files]
     assert p["rig_sha256"] == hashlib.sha256(rig.read_bytes()).hexdigest() and p["rig_text"] == rig.read_text()
     assert any("Butterworth order 4" in line for line in p["pipeline"])
@@ -228,3 +229,20 @@ def test_file_errors_one_line(tmp_path):
     scipy.io.savemat(tmp_path / "S1_0V_2.mat", {"data": np.zeros((10, 2))})
     with pytest.raises(InputError, match=r"S1_0V_2.mat: has 2 columns; channels.position.column = 2"):
         run_ingest([tmp_path / "S1_0V_2.mat"], rig)
+
+
+@pytest.mark.filterwarnings("ignore::skinfit.errors.ConvergenceWarning")  # a short fit: only the reading is checked
+def test_cli_review_and_fit(tmp_path, capsys):
+    """`skinfit ingest ... --review` writes the dataset and the page; `skinfit.fit` reads the folder."""
+    rng = np.random.default_rng(3)
+    files, _ = _trials(tmp_path, rng, 3, off_target=(1,))
+    out = tmp_path / "ds"
+    assert main(["ingest", *map(str, files), "--rig", str(write(tmp_path, RIG)), "--out", str(out), "--review"]) == 0
+    text = capsys.readouterr().out
+    assert "12 strokes from 2 of 3 trial(s)" in text and f"rejected {files[1].stem}: mean normal_force" in text
+    page = (out / "review" / "index.html").read_text()
+    assert page.count("<img") == 3 and "rejected: mean normal_force" in page
+    assert main(["ingest", str(files[0]), "--rig", str(tmp_path / "rig.toml"), "--out", str(out)]) == 2
+    assert "holds a dataset already (pass --overwrite" in capsys.readouterr().err
+    fit = skinfit.fit("electroadhesion_empirical", out, rng=1, max_steps=300, ess_target=20, n_global=200)
+    assert fit.idata["observed_data"]["tangential_force"].size == 12

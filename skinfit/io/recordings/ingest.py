@@ -176,7 +176,8 @@ def _columns(frame, rig, meta):
     for k in meta:
         spec = rig.metadata.get(k)
         if spec and spec["unit"]:
-            cols.append(Column(k, k, spec["si_unit"], "quantity", signed=True))
+            signed = bool((pd.to_numeric(frame[k]) < 0).any())
+            cols.append(Column(k, k, spec["si_unit"], "quantity", signed=signed))
         else:
             cols.append(Column(k, k, None, "category"))
     cols += [Column("direction", "direction", None, "category"), Column("start_time", "start_time", "s", "quantity"),
