@@ -128,7 +128,7 @@ def _stroke(record, rig, buf, off, a, b, sign, names, rectify, chunker):
         return
     piece = {k: x[ka - off: kb - off] for k, x in buf.items()}
     row = {"direction": direction, "start_time": ka / rate, "duration": (kb - ka) / rate, "n_samples": kb - ka}
-    row.update(reduce_window(piece, names, rectify, sign))
+    row.update(reduce_window(piece, names, rectify, max(int(rate // (5 * rig.lowpass)), 1)))
     bias_se = chunker.bias_se((ka + kb) / 2 / rate)
     for name in names:
         row[f"{name}_se"] = float(np.hypot(row[f"{name}_se"], bias_se.get(name, 0.0)))

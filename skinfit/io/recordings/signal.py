@@ -82,11 +82,11 @@ class Bias:
         return math.hypot((1 - w2) * self.s1, w2 * self.s2)
 
 
-def _window(trial, c, sos, i0, i1):
+def _window(trial, c, sos, i0, i1, rig_lowpass):
     """(mean of the raw samples [i0, i1) of channel ``c``, standard error from their filtered scatter)."""
     x = trial.read(c, i0, i1)
     y = scipy.signal.sosfiltfilt(sos, x) if len(sos) and len(x) > 3 * (2 * len(sos) + 1) else x
-    return float(np.mean(x)), standard_error(y)[1]
+    return float(np.mean(x)), standard_error(y, max(int(trial.rate(c) // (5 * rig_lowpass)), 1))[1]
 
 
 def biases(trial, rig, filters):
@@ -100,13 +100,13 @@ def biases(trial, rig, filters):
         sos = filters[rate].sos
 
         k = min(max(round(c.bias_first * rate), 2), n)
-        b1, s1 = _window(trial, c, sos, 0, k)
+        b1, s1 = _window(trial, c, sos, 0, k, rig.lowpass)
         t1 = (k - 1) / 2 / rate
         if c.bias_last is None:
             out[c.name] = Bias(b1, 0.0, s1, None, t1, None)
             continue
         k2 = min(max(round(c.bias_last * rate), 2), n)
-        b2, s2 = _window(trial, c, sos, n - k2, n)
+        b2, s2 = _window(trial, c, sos, n - k2, n, rig.lowpass)
         t2 = (n - k2 + (n - 1)) / 2 / rate
         slope = (b2 - b1) / (t2 - t1) if t2 > t1 else 0.0
         out[c.name] = Bias(b1 - slope * t1, slope, s1, s2, t1, t2)
@@ -134,8 +134,8 @@ class Chunker:
         self.n = trial.n
 
     def _channel(self, c, a, b):
-        """(times [s], SI values) of channel ``c`` over base samples [a, b) at its own rate (a
-        slower channel: its samples covering that time, one more at each end)."""
+        """(times [s] or None at the base rate, SI values) of channel ``c`` over base samples
+        [a, b) at its own rate (a slower channel: its samples covering that time, one more at each end)."""
         rate = self.trial.rate(c)
         if rate == self.rate:
             i0, i1 = a, b
@@ -143,12 +143,18 @@ class Chunker:
             i0 = math.floor(a / self.rate * rate + 1e-9) - 1
             i1 = math.ceil((b - 1) / self.rate * rate - 1e-9) + 2
         i0, i1 = max(i0, 0), min(i1, self.trial.length(c))
-        raw = self.trial.read(c, i0, i1)
-        t = np.arange(i0, i0 + len(raw)) / rate
-        if c.name in self.bias:
-            bias = self.bias[c.name]
-            raw = raw - (bias.b0 + bias.slope * t)
-        return t, raw * c.factor
+        x = self.trial.read(c, i0, i1)
+        if not x.flags.owndata:  # a view of a matrix read whole (v5, CSV): changed in place below
+            x = x.copy()
+        t = np.arange(i0, i0 + len(x)) / rate if rate != self.rate else None
+        bias = self.bias.get(c.name)
+        if bias is not None:
+            if bias.slope:
+                x -= bias.b0 + bias.slope * (np.arange(i0, i0 + len(x)) / rate if t is None else t)
+            else:
+                x -= bias.b0
+        x *= c.factor
+        return t, x
 
     def _filter(self, x, rate):
         f = self.filters[rate]
