@@ -29,7 +29,7 @@ format = "hdf5"
 dataset = "fx"
 unit = "V"
 gain = { value = 0.4444, unit = "N/V" }
-bias = { first = { value = 0.5, unit = "s" }, last = { value = 0.5, unit = "s" } }
+bias = { first = { value = 0.5, unit = "s" } }
 rectify = true
 [channels.lateral_force]
 dataset = "fy"

@@ -60,14 +60,15 @@ def _ar1(rng, n, phi, sd):
 
 
 def stroke_recording(rng, *, rate=10_000.0, normal=0.5, lengths=(0.8, 1.2, 0.6, 1.5, 1.0, 0.9), speed=0.04,
-                     law=(0.3, 0.67, 0.3), phi=0.98, noise=0.005, hum=0.02, carrier=0.05, drift=0.02):
+                     law=(0.3, 0.67, 0.3), phi=0.98, noise=0.005, hum=0.02, carrier=0.05, drift=0.02, scatter=0.0):
     """A finger sliding back and forth on a force plate, in newtons and metres, at ``rate`` Hz.
 
     0.6 s at rest (finger off), 0.4 s loading to the stroke's normal force, then one stroke per
     entry of ``lengths`` (seconds at constant ``speed`` m/s, 50 ms speed ramps, alternating
     forward and backward, 0.3 s dwell between), unloading, 0.6 s at rest.  Each stroke's normal
     force is ``normal`` times a factor uniform in 0.95-1.05; its tangential force is the power
-    law b Fn^c + d Fn (``law``), its sign that of the velocity.  Both forces carry AR(1)
+    law b Fn^c + d Fn (``law``) plus a stroke-to-stroke normal scatter of sd ``scatter`` N,
+    its sign that of the velocity.  Both forces carry AR(1)
     noise (``phi``, sd ``noise`` N), a 50 Hz hum (``hum`` N), a 1 kHz carrier (``carrier`` N);
     the tangential channel a bias drift of ``drift`` N over the trial.  Returns (dict of (n,)
     arrays ``t, tangential_force, normal_force, position``, list of per-stroke dicts with the
@@ -87,7 +88,8 @@ def stroke_recording(rng, *, rate=10_000.0, normal=0.5, lengths=(0.8, 1.2, 0.6, 
     for k, (length, fn) in enumerate(zip(lengths, fns)):
         s = 1.0 if k % 2 == 0 else -1.0
         b, c, d = law
-        strokes.append({"normal_force": fn, "tangential_force": b * fn**c + d * fn,
+        level = b * fn**c + d * fn + (rng.normal(0.0, scatter) if scatter else 0.0)
+        strokes.append({"normal_force": fn, "tangential_force": level,
                         "direction": "forward" if s > 0 else "backward", "start": t_now})
         seg(ramp, 0, s * speed, fn, fn)
         seg(length, s * speed, s * speed, fn, fn)

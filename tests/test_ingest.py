@@ -83,7 +83,7 @@ def test_strokes_found_and_calibrated(tmp_path, writer):
     by = {r.name: r for r in ing.trials}
     for name, strokes in truth.items():
         assert len(by[name].strokes) == len(strokes)  # every stroke found, none invented
-    assert not by[files[2].stem].kept and "% off the target 0.5 (SI units; tolerance 15%)" in by[files[2].stem].reason
+    assert not by[files[2].stem].kept and "% off the target 0.5 N (tolerance 15%)" in by[files[2].stem].reason
     frame = ing.dataset.frame
     assert files[2].stem not in set(frame.recording)
     z = []

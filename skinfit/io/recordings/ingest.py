@@ -151,8 +151,9 @@ def _reject(record, rig):
         target = float(value)
     mean = float(np.mean([r[channel] for r in record.rows]))
     if target > 0 and abs(mean - target) > tol * target:
-        record.reason = (f"mean {channel} {mean:.4g} is {100 * abs(mean - target) / target:.0f}% off the target "
-                         f"{target:.4g} (SI units; tolerance {100 * tol:.0f}%)")
+        unit = rig.derived[channel][1]
+        record.reason = (f"mean {channel} {mean:.4g} {unit} is {100 * abs(mean - target) / target:.0f}% off the "
+                         f"target {target:.4g} {unit} (tolerance {100 * tol:.0f}%)")
 
 
 def _frame(records, rig, names):
