@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from skinfit.errors import InputError
-from skinfit.io.arguments import check_path
+from skinfit.io.arguments import check_input_file, check_path
 from skinfit.io.data import Column, Dataset, load_dataset, write_card
 from skinfit.io.paths import display
 from skinfit.io.recordings.read import open_trials
@@ -249,12 +249,13 @@ def run_ingest(files, rig, out=None, *, traces=False, chunk_seconds=CHUNK_SECOND
     """Ingest raw recordings ``files`` (paths) as the rig file ``rig`` (a path or a loaded Rig)
     describes: an :class:`Ingestion` with the dataset and every trial's record; ``traces`` keeps
     a thinned copy of each trial's signals for the review page."""
-    rig = rig if isinstance(rig, Rig) else load_rig(check_path(rig, "rig", None, "the path of a rig file (TOML)"))
     if isinstance(files, (str, os.PathLike)):
         files = [files]
-    files = [Path(check_path(f, "files", None, "paths of raw recordings")) for f in files]
+    files = [Path(check_input_file(check_path(f, "files", None, "paths of raw recordings"), "raw recording"))
+             for f in files]
     if not files:
         raise InputError("files", "expected at least one raw recording")
+    rig = rig if isinstance(rig, Rig) else load_rig(check_path(rig, "rig", None, "the path of a rig file (TOML)"))
     handles = []
     try:
         trials = open_trials(rig, files, handles)
