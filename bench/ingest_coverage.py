@@ -100,7 +100,12 @@ def main():
     p.add_argument("--n", type=int, default=50)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ess", type=float, default=200)
+    p.add_argument("--truth", default="", help="generating values, e.g. b=0.25,c_exp=0.8,d=0.2 (default: "
+                   "b=0.3, c_exp=0.67, d=0.3, sigma=0.01, the prior centres of c_exp and d)")
     args = p.parse_args()
+    for item in filter(None, args.truth.split(",")):
+        key, value = item.split("=")
+        TRUTH[key] = float(value)
     results, t0 = [], time.perf_counter()
     for i in range(args.n):
         with tempfile.TemporaryDirectory() as tmp:
@@ -110,7 +115,7 @@ def main():
         print(json.dumps({"i": i, "rows": r["rows"], "rejected_ok": r["rejected_ok"], "inside": r["inside"],
                           "coverage_so_far": cover, "elapsed_s": round(time.perf_counter() - t0)}), flush=True)
     z = np.concatenate([r["z"] for r in results])
-    summary = {"experiments": len(results), "coverage": {k: float(np.mean([x["inside"][k] for x in results]))
+    summary = {"truth": TRUTH, "experiments": len(results), "coverage": {k: float(np.mean([x["inside"][k] for x in results]))
                                                           for k in TRUTH},
                "rejected_correctly": int(sum(r["rejected_ok"] for r in results)),
                "z_mean": float(z.mean()), "z_sd": float(z.std()), "z_n": len(z)}

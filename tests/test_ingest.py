@@ -126,6 +126,7 @@ def test_hdf5_slow_position_and_newtons(tmp_path):
             g = fh.create_group(f"trials/t{k}")
             g.attrs["sample_rate_hz"] = 10000.0
             g.attrs["subject"] = "S1"
+            g.attrs["load"] = 500.0  # mN, declared under [metadata]
             g["fx"] = sig["tangential_force"] + 0.1
             g["fz"] = sig["normal_force"] + 0.05
             g["x"] = sig["position"][::10] * 1e3  # mm at 1 kHz
@@ -133,6 +134,8 @@ def test_hdf5_slow_position_and_newtons(tmp_path):
             truth[f"session/t{k}"] = strokes
     rig = write(tmp_path, """schema_version = 1
 format = "hdf5"
+[metadata.load]
+unit = "mN"
 [channels.tangential_force]
 dataset = "fx"
 unit = "N"
@@ -156,7 +159,7 @@ min_duration = { value = 0.3, unit = "s" }
 """)
     ing = run_ingest([tmp_path / "session.h5"], rig)
     frame = ing.dataset.frame
-    assert len(frame) == 12 and set(frame.subject) == {"S1"}
+    assert len(frame) == 12 and set(frame.subject) == {"S1"} and set(frame.load) == {0.5}
     for name, group in frame.groupby("recording"):
         want = np.array([s["tangential_force"] for s in truth[name]])
         assert np.all(np.abs(group.tangential_force.to_numpy() - want) < 5 * group.tangential_force_se.to_numpy())

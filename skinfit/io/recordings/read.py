@@ -219,6 +219,13 @@ def open_trials(rig, files, handles):
         else:
             found = [_csv_trial(rig, path, where)]
         for t in found:
+            for k, v in t.attrs.items():  # an HDF5 attribute declared a quantity under [metadata]: to SI
+                spec = rig.metadata.get(k)
+                if spec and spec["unit"]:
+                    if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+                        raise InputError(where, f"attribute {k!r} of {t.name} is {v!r}; expected a number in "
+                                         f"{spec['unit']}", field=f"metadata.{k}")
+                    t.attrs[k] = float(v) * spec["factor"]
             t.attrs.update(trial_metadata(rig, path))
             if t.n < 2:
                 raise InputError(where, "holds fewer than two samples")

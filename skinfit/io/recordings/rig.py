@@ -114,8 +114,9 @@ class Rig:
                 "(scipy.signal.sosfiltfilt)", f"notch {notch} (Q {self.notch_q:g}, zero phase)",
                 f"strokes: |v| > {self.speed_above:g} m/s and {self.normal} > {self.normal_force_above:g} N, "
                 f"trim {self.trim:g} s at each end, kept window >= {self.min_duration:g} s",
-                "standard error: within-window sd / sqrt(n / tau), tau the integrated autocorrelation time "
-                "(emcee.autocorr.integrated_time, c = 5)",
+                "standard error: within-window sd / sqrt(n_eff), n_eff = n / tau (1 - (2M + 1) / n), tau the "
+                "integrated autocorrelation time (emcee.autocorr.integrated_time, c = 5, window M ~ 5 tau) of the "
+                "window subsampled to 5x the low-pass cut-off; the bias's standard error added in quadrature",
                 f"reject: {self.reject}" if self.reject else "reject: no rule"]
 
 
