@@ -249,3 +249,17 @@ def test_cli_review_and_fit(tmp_path, capsys):
     assert "holds a dataset already (pass --overwrite" in capsys.readouterr().err
     fit = skinfit.fit("electroadhesion_empirical", out, rng=1, max_steps=300, ess_target=20, n_global=200)
     assert fit.idata["observed_data"]["tangential_force"].size == 12
+
+
+def test_chunks_join_into_the_whole_recording_filtered(tmp_path):
+    """Filtering by 0.3 s chunks (strokes carried across chunk ends) gives the rows of one chunk."""
+    rng = np.random.default_rng(13)
+    sig, _ = stroke_recording(rng)
+    scipy.io.savemat(tmp_path / "S1_0V_1.mat", {"data": rig_volts(sig)})
+    rig = write(tmp_path, ISSUE_RIG)
+    whole = run_ingest([tmp_path / "S1_0V_1.mat"], rig, chunk_seconds=1000).dataset.frame
+    chunked = run_ingest([tmp_path / "S1_0V_1.mat"], rig, chunk_seconds=0.3).dataset.frame
+    assert len(whole) == 6
+    for col in ("normal_force", "tangential_force", "speed", "start_time", "duration"):
+        np.testing.assert_allclose(chunked[col], whole[col], rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(chunked.normal_force_se, whole.normal_force_se, rtol=1e-3)
