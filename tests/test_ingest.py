@@ -229,6 +229,12 @@ def test_file_errors_one_line(tmp_path):
     scipy.io.savemat(tmp_path / "bad.mat", {"data": np.zeros((10, 3))})
     with pytest.raises(InputError, match=r"bad.mat: pattern: file name does not match"):
         run_ingest([tmp_path / "bad.mat"], rig)
+    matrix = np.zeros((10, 3))
+    matrix[7, 1] = np.nan
+    scipy.io.savemat(tmp_path / "S1_0V_3.mat", {"data": matrix})
+    with pytest.raises(InputError, match=r"S1_0V_3.mat: channel 'normal_force': sample 7 \(0-based, at 0.0007 s\) is "
+                       r"nan: expected finite numbers"):
+        run_ingest([tmp_path / "S1_0V_3.mat"], rig)
     scipy.io.savemat(tmp_path / "S1_0V_2.mat", {"data": np.zeros((10, 2))})
     with pytest.raises(InputError, match=r"S1_0V_2.mat: has 2 columns; channels.position.column = 2"):
         run_ingest([tmp_path / "S1_0V_2.mat"], rig)
@@ -247,7 +253,7 @@ def test_cli_review_and_fit(tmp_path, capsys):
     assert page.count("<img") == 3 and "rejected: mean normal_force" in page
     assert main(["ingest", str(files[0]), "--rig", str(tmp_path / "rig.toml"), "--out", str(out)]) == 2
     assert "holds a dataset already (pass --overwrite" in capsys.readouterr().err
-    fit = skinfit.fit("electroadhesion_empirical", out, rng=1, max_steps=300, ess_target=20, n_global=200)
+    fit = skinfit.fit("electroadhesion_empirical", out, rng=1, max_steps=150, ess_target=20, n_global=100)
     assert fit.idata["observed_data"]["tangential_force"].size == 12
 
 

@@ -15,6 +15,8 @@ def run(args):
     if (out / "dataset.toml").exists() and not args.overwrite:
         raise InputError(args.out, "holds a dataset already (pass --overwrite to replace it)", field="--out")
     ing = run_ingest(args.raw, args.rig, out, traces=args.review)
+    for old in (out / "review").glob("trial_*.png") if args.review else ():  # figures of an earlier run
+        old.unlink()
     review = write_review(ing, out / "review") if args.review else None
     kept = [t for t in ing.trials if t.kept]
     if args.json:

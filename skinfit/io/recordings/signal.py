@@ -32,7 +32,7 @@ class Filters:
     lowpass: float | None  # [Hz] None when above this rate's Nyquist frequency (a slow channel)
 
 
-def design(rig, rate, where):
+def design(rig, rate):
     """Butterworth low-pass of the rig's order and the notches below Nyquist, at ``rate`` Hz.
 
     The base rate must exceed twice the cut-off (InputError naming filter.lowpass); a channel at
@@ -127,7 +127,7 @@ class Chunker:
         for c in rig.channels:
             r = trial.rate(c)
             if r not in self.filters:
-                self.filters[r] = design(rig, r, where)
+                self.filters[r] = design(rig, r)
         self.bias = biases(trial, rig, self.filters)
         # the widened window in base samples: the longest margin of any rate, in time
         self.margin = max(math.ceil(f.margin / r * self.rate) + 2 for r, f in self.filters.items())
@@ -144,6 +144,11 @@ class Chunker:
             i1 = math.ceil((b - 1) / self.rate * rate - 1e-9) + 2
         i0, i1 = max(i0, 0), min(i1, self.trial.length(c))
         x = self.trial.read(c, i0, i1)
+        if not np.all(np.isfinite(x)):
+            bad = i0 + int(np.flatnonzero(~np.isfinite(x))[0])
+            raise InputError(self.where, f"sample {bad} (0-based, at {bad / rate:.4f} s) is {float(x[bad - i0])}: "
+                             "expected finite numbers (cut the recording before a gap, or fill it)",
+                             field=f"channel {c.name!r}")
         if not x.flags.owndata:  # a view of a matrix read whole (v5, CSV): changed in place below
             x = x.copy()
         t = np.arange(i0, i0 + len(x)) / rate if rate != self.rate else None
