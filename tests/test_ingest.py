@@ -166,30 +166,32 @@ min_duration = { value = 0.3, unit = "s" }
         assert np.allclose(group.speed, 0.04, rtol=0.02)
 
 
-def test_calibration_matrix_and_csv(tmp_path):
-    """Six gauges through a 6x6 matrix (a 90-degree mounting rotation about z) from a CSV with a time column."""
+@pytest.mark.parametrize("k", [3, 6])
+def test_calibration_matrix_and_csv(tmp_path, k):
+    """k gauges through a k x k matrix (a 90-degree mounting rotation about z) from a CSV with a time column."""
     rng = np.random.default_rng(9)
     sig, strokes = stroke_recording(rng, rate=5000.0, lengths=(0.8, 0.9, 1.0), drift=0.0)
-    cal = np.eye(6) + 0.05 * rng.normal(size=(6, 6))
+    cal = np.eye(k) + 0.05 * rng.normal(size=(k, k))
     rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     n = len(sig["t"])
-    sensor = np.zeros((6, n))
+    sensor = np.zeros((k, n))
     sensor[:3] = rot.T @ np.vstack([sig["tangential_force"], np.zeros(n), sig["normal_force"]])  # sensor frame
     gauges = np.linalg.solve(cal, sensor) + 0.2  # volts with an offset
-    header = "time,g0,g1,g2,g3,g4,g5,x_mm"
+    header = ",".join(["time", *(f"g{i}" for i in range(k)), "x_mm"])
+    outputs = ["tangential_force", "fy", "normal_force", "tx", "ty", "tz"][:k]
     table = np.column_stack([sig["t"], gauges.T, sig["position"] * 1e3])
     np.savetxt(tmp_path / "run.csv", table, delimiter=",", header=header, comments="")
     rig = write(tmp_path, f"""schema_version = 1
 format = "csv"
 time_column = "time"
 {"".join(f'[channels.g{i}]{chr(10)}column = "g{i}"{chr(10)}unit = "V"{chr(10)}'
-         f'bias = {{ first = {{ value = 0.5, unit = "s" }} }}{chr(10)}' for i in range(6))}
+         f'bias = {{ first = {{ value = 0.5, unit = "s" }} }}{chr(10)}' for i in range(k))}
 [channels.position]
 column = "x_mm"
 unit = "mm"
 [calibration]
-inputs = ["g0", "g1", "g2", "g3", "g4", "g5"]
-outputs = ["tangential_force", "fy", "normal_force", "tx", "ty", "tz"]
+inputs = {[f"g{i}" for i in range(k)]}
+outputs = {outputs}
 unit = "N/V"
 matrix = {cal.tolist()}
 rotation = {rot.tolist()}

@@ -52,11 +52,12 @@ class Channel:
 
 @dataclass(frozen=True)
 class Calibration:
-    """A 6x6 calibration matrix from six input channels (SI) to six outputs (SI), rotation applied."""
+    """A k x k calibration matrix (k = 3: a 3-axis force sensor; k = 6: forces and torques) from k
+    input channels (SI) to k outputs (SI), the mounting rotation applied."""
 
     inputs: tuple
     outputs: tuple
-    matrix: np.ndarray  # (6, 6), SI; already rotated
+    matrix: np.ndarray  # (k, k), SI; already rotated
     dims: tuple  # output dimensions
     si_units: tuple
 
@@ -206,8 +207,10 @@ def _calibration(doc, channels, where):
     inputs = require(spec, "inputs", list, where, field_prefix=p)
     outputs = require(spec, "outputs", list, where, field_prefix=p)
     by_name = {c.name: c for c in channels}
-    if len(inputs) != 6 or len(outputs) != 6 or not all(isinstance(n, str) for n in inputs + outputs):
-        raise InputError(where, "expected six input channel names and six output names (a 6-axis sensor)",
+    k = len(inputs)
+    if k not in (3, 6) or len(outputs) != k or not all(isinstance(n, str) for n in inputs + outputs):
+        raise InputError(where, "expected as many input channel names as output names, three (a 3-axis force sensor) "
+                         "or six (forces and torques)",
                          field=p + "inputs")
     for n in inputs:
         if n not in by_name:
@@ -215,19 +218,20 @@ def _calibration(doc, channels, where):
                              f"{', '.join(by_name)})", field=p + "inputs")
     units = {by_name[n].unit for n in inputs}
     if len(units) > 1 or any(by_name[n].factor != parse_unit(by_name[n].unit).factor for n in inputs):
-        raise InputError(where, "the six inputs must share one unit and have no gain (the matrix is the gain)",
+        raise InputError(where, "the inputs must share one unit and have no gain (the matrix is the gain)",
                          field=p + "inputs")
     matrix = require(spec, "matrix", list, where, field_prefix=p)
     try:
         m = np.array(matrix, dtype=float)
     except (TypeError, ValueError):
         m = np.zeros(0)
-    if m.shape != (6, 6) or not np.all(np.isfinite(m)):
-        raise InputError(where, "expected a 6x6 matrix of numbers (rows: outputs, columns: inputs)", field=p + "matrix")
+    if m.shape != (k, k) or not np.all(np.isfinite(m)):
+        raise InputError(where, f"expected a {k}x{k} matrix of numbers (rows: outputs, columns: inputs)",
+                         field=p + "matrix")
     row_units = require(spec, "unit", (str, list), where, field_prefix=p)
-    row_units = [row_units] * 6 if isinstance(row_units, str) else row_units
-    if len(row_units) != 6 or not all(isinstance(u, str) for u in row_units):
-        raise InputError(where, "expected one unit or six (one per output row)", field=p + "unit")
+    row_units = [row_units] * k if isinstance(row_units, str) else row_units
+    if len(row_units) != k or not all(isinstance(u, str) for u in row_units):
+        raise InputError(where, f"expected one unit or {k} (one per output row)", field=p + "unit")
     in_unit = units.pop()
     parsed = [_unit(f"{in_unit}*{u}", where, p + "unit") for u in row_units]
     scale = np.array([u.factor for u in parsed]) / parse_unit(in_unit).factor
@@ -240,8 +244,7 @@ def _calibration(doc, channels, where):
             r = np.zeros(0)
         if r.shape != (3, 3) or not np.allclose(r @ r.T, np.eye(3), atol=1e-6):
             raise InputError(where, "expected a 3x3 rotation matrix (orthonormal rows)", field=p + "rotation")
-        block = np.zeros((6, 6))
-        block[:3, :3] = block[3:, 3:] = r
+        block = np.kron(np.eye(k // 3), r)  # forces (and torques) rotated alike
         m = block @ m
     return Calibration(tuple(inputs), tuple(outputs), m, tuple(u.dims for u in parsed),
                        tuple(_si_unit(u) for u in parsed))
