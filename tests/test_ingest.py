@@ -271,3 +271,27 @@ def test_chunks_join_into_the_whole_recording_filtered(tmp_path):
     for col in ("normal_force", "tangential_force", "speed", "start_time", "duration"):
         np.testing.assert_allclose(chunked[col], whole[col], rtol=1e-7, atol=1e-9)
     np.testing.assert_allclose(chunked.normal_force_se, whole.normal_force_se, rtol=1e-3)
+
+
+@pytest.mark.parametrize("transposed", [False, True])
+def test_hdf5_matrix_dataset_reads_as_the_mat_file(tmp_path, transposed):
+    """Channels as columns of one 2-D HDF5 dataset per trial (samples x channels, or channels x
+    samples as MATLAB's h5write leaves it) give the rows the same matrix gives from a .mat file."""
+    rng = np.random.default_rng(17)
+    sig, _ = stroke_recording(rng)
+    matrix = rig_volts(sig)
+    scipy.io.savemat(tmp_path / "S1_0V_1.mat", {"data": matrix})
+    with h5py.File(tmp_path / "S1_0V_1.h5", "w") as fh:
+        fh.create_group("trials/one").attrs["sample_rate_hz"] = 10000.0
+        fh["trials/one/voltages"] = matrix.T if transposed else matrix
+    text = ISSUE_RIG.replace('format = "mat"', 'format = "hdf5"').replace('variable = "data"', "")
+    text = text.replace("column = ", 'dataset = "voltages"\ncolumn = ').replace("pattern = ", "# pattern = ")
+    with pytest.raises(InputError, match=r"S1_0V_1.h5: metadata.voltage: trial S1_0V_1/one has no value for metadata "
+                       r"'voltage' declared in the rig file"):
+        run_ingest([tmp_path / "S1_0V_1.h5"], write(tmp_path, text, "h5rig.toml"))
+    text = text.replace("[metadata.voltage]", "[metadata.voltage]\nvalue = 0")
+    h5 = run_ingest([tmp_path / "S1_0V_1.h5"], write(tmp_path, text, "h5rig.toml")).dataset.frame
+    mat = run_ingest([tmp_path / "S1_0V_1.mat"], write(tmp_path, ISSUE_RIG)).dataset.frame
+    assert len(h5) == len(mat) == 6
+    for col in ("normal_force", "tangential_force", "normal_force_se", "speed", "start_time"):
+        np.testing.assert_allclose(h5[col], mat[col], rtol=1e-12)

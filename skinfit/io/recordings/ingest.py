@@ -164,6 +164,11 @@ def _frame(records, rig, names):
     for r in records:
         if not r.kept:
             continue
+        missing = [k for k in rig.metadata if k not in r.metadata]
+        if missing:
+            raise InputError(display(r.file), f"trial {r.name} has no value for metadata {missing[0]!r} declared in "
+                             f"the rig file (expected from the file-name pattern, an HDF5 attribute of the trial, or "
+                             f"metadata.{missing[0]}.value)", field=f"metadata.{missing[0]}")
         for s in r.rows:
             rows.append({"recording": r.name, **{k: r.metadata.get(k, "") for k in meta}, **s})
     order = ["recording", *meta, "direction", "start_time", "duration", "n_samples", "n_eff"]

@@ -86,16 +86,30 @@ class _Matrix:
 
 
 class _Group:
-    """An HDF5 trial group: one 1-D dataset per channel."""
+    """An HDF5 trial group: a 1-D dataset per channel, or channels as columns of a 2-D dataset
+    (``column = k``; its longer axis is taken for time, so a matrix MATLAB wrote transposed reads
+    the same)."""
 
     def __init__(self, rig, group, rate, where):
         self.rig, self.group, self.base, self.where = rig, group, rate, where
+        self.rows = {}  # channel name -> True when samples run along the dataset's first axis
         for c in rig.channels:
             d = group.get(c.source)
-            if not isinstance(d, h5py.Dataset) or d.ndim != 1:
-                raise InputError(where, f"has no 1-D dataset {c.source!r} (expected one of "
-                                 f"{', '.join(k for k in group if isinstance(group[k], h5py.Dataset))})",
-                                 field=f"channels.{c.name}.dataset")
+            found = ", ".join(k for k in group if isinstance(group[k], h5py.Dataset))
+            field = f"channels.{c.name}.dataset"
+            if not isinstance(d, h5py.Dataset) or d.ndim not in (1, 2):
+                raise InputError(where, f"has no 1-D or 2-D dataset {c.source!r} (expected one of {found})",
+                                 field=field)
+            if (d.ndim == 2) != (c.column is not None):
+                raise InputError(where, f"dataset {c.source!r} is {d.ndim}-D with shape {d.shape}: "
+                                 + ("give its column (channels.NAME.column)" if d.ndim == 2
+                                    else "a column applies to a 2-D dataset only"), field=field)
+            if d.ndim == 2:
+                self.rows[c.name] = d.shape[0] >= d.shape[1]
+                width = d.shape[1] if self.rows[c.name] else d.shape[0]
+                if c.column >= width:
+                    raise InputError(where, f"dataset {c.source!r} has {width} channels; column {c.column} (0-based) "
+                                     "is past them", field=f"channels.{c.name}.column")
 
     def rate(self, channel):
         d = self.group[channel.source]
@@ -109,10 +123,13 @@ class _Group:
         return [c for c in self.rig.channels if not self.rate(c) or self.rate(c) == self.base] or self.rig.channels
 
     def length(self, channel):
-        return self.group[channel.source].shape[0]
+        return max(self.group[channel.source].shape)
 
     def read(self, channel, start, stop):
-        return self.group[channel.source][start:stop]
+        d = self.group[channel.source]
+        if d.ndim == 1:
+            return d[start:stop]
+        return d[start:stop, channel.column] if self.rows[channel.name] else d[channel.column, start:stop]
 
 
 def _scalar(value):

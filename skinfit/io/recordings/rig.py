@@ -48,6 +48,7 @@ class Channel:
     sample_rate: float | None = None  # [Hz] its own rate, when sampled slower than the others
     rectify: bool = False  # stroke means reported as magnitudes (a force whose sign follows the stroke)
     output: bool = True  # a column of the dataset (a raw position is not)
+    column: int | None = None  # HDF5: the channel's column of a 2-D dataset (its longer axis is time)
 
 
 @dataclass(frozen=True)
@@ -163,8 +164,12 @@ def _channel(name, spec, fmt, where):
     if not isinstance(spec, dict):
         raise InputError(where, "expected a table (column = ..., unit = ...)", field=prefix.rstrip("."))
     _refuse_unknown(spec, _CHANNEL_KEYS, where, prefix)
+    column = None
     if fmt == "hdf5":
         source = require(spec, "dataset", str, where, field_prefix=prefix, default=name)
+        column = require(spec, "column", int, where, field_prefix=prefix, default=None)
+        if column is not None and column < 0:
+            raise InputError(where, f"expected a 0-based column number >= 0 (got {column!r})", field=prefix + "column")
     else:
         source = require(spec, "column", (int, str) if fmt == "csv" else int, where, field_prefix=prefix)
         if isinstance(source, int) and (isinstance(source, bool) or source < 0):
@@ -195,7 +200,7 @@ def _channel(name, spec, fmt, where):
         raise InputError(where, "expected a sample rate > 0", field=prefix + "sample_rate")
     return Channel(name, source, unit_text, float(factor), out.dims, _si_unit(out), first, last, rate,
                    require(spec, "rectify", bool, where, field_prefix=prefix, default=False),
-                   require(spec, "output", bool, where, field_prefix=prefix, default=True))
+                   require(spec, "output", bool, where, field_prefix=prefix, default=True), column)
 
 
 def _calibration(doc, channels, where):
