@@ -111,9 +111,10 @@ class Rig:
 
     def settings(self):
         """The pipeline's settings as text lines (recorded in the dataset's provenance)."""
-        notch = ", ".join(f"{f:g} Hz" for f in self.notch) or "none"
+        notch = (", ".join(f"{f:g} Hz" for f in self.notch) + f" (Q {self.notch_q:g}, zero phase)") if self.notch \
+            else "none"
         return [f"format {self.format}", f"lowpass {self.lowpass:g} Hz, Butterworth order {self.order}, zero phase "
-                "(scipy.signal.sosfiltfilt)", f"notch {notch} (Q {self.notch_q:g}, zero phase)",
+                "(scipy.signal.sosfiltfilt)", f"notch {notch}",
                 f"strokes: |v| > {self.speed_above:g} m/s and {self.normal} > {self.normal_force_above:g} N, "
                 f"trim {self.trim:g} s at each end, kept window >= {self.min_duration:g} s",
                 "standard error: within-window sd / sqrt(n_eff), n_eff = n / tau (1 - (2M + 1) / n), tau the "
