@@ -24,10 +24,13 @@ import tempfile
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
+import scipy.io
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from popdata import write_population
+from recordings import ISSUE_RIG
 
 from skinfit.apps.cli import build_parser, main
 
@@ -47,7 +50,8 @@ def _work(*args, **kwargs):
 STAND_INS = {"skinfit.inference.run": ["find_map"], "skinfit.analysis.compare": ["evidence"], "skinfit.report.html": ["write_report"],
              "skinfit.apps.campaign": ["_run_locked"], "skinfit.analysis.population.population": ["run_gibbs", "reweight"],
              "skinfit.analysis.sbc": ["_map"], "skinfit.apps.demo": ["ProcessPoolExecutor"],
-             "skinfit.analysis.design.plan": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"]}
+             "skinfit.analysis.design.plan": ["batch_eig", "eig_nmc", "greedy_plan", "laplace_design"],
+             "skinfit.io.recordings.ingest": ["open_trials"]}
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +71,8 @@ def inputs(tmp_path_factory):
                                     '[grid.voltage]\nunit = "V"\nvalues = [0, 100]\n')
     (root / "camp.toml").write_text(f'schema_version = 1\nseed = 1\nout = "camp_out"\nmodels = ["{MODEL}"]\n'
                                     f'datasets = ["{DATASET}"]\nby = ["voltage"]\n[fit]\ness = 50\nmax_steps = 400\n')
+    (root / "rig.toml").write_text(ISSUE_RIG)
+    scipy.io.savemat(root / "S1_0V_1.mat", {"data": np.zeros((100, 3))})
     os.mkfifo(root / "fifo")
     (root / "folder").mkdir()
     (root / "file.txt").write_text("x")
@@ -86,7 +92,8 @@ def _base(cmd, root, out):
             "demo": ["--out", str(out), "--dataset", DATASET],
             "design": [MODEL, "--candidates", str(root / "grid.toml")],
             "dataset init": [str(root / "lab.csv"), "--model", MODEL, "--out", str(out),
-                             "--column", "Ft=tangential_force:mN"]}[cmd]
+                             "--column", "Ft=tangential_force:mN"],
+            "ingest": [str(root / "S1_0V_1.mat"), "--rig", str(root / "rig.toml"), "--out", str(out)]}[cmd]
 
 
 def _arguments():
@@ -112,7 +119,8 @@ def _arguments():
 ARGUMENTS = _arguments()
 NUMBER_TYPES = {"parse", "_positive_float", "int", "float"}
 #: dests that name a file or folder skinfit reads, and folders it writes
-INPUTS = {"model", "dataset", "runs", "campaign", "candidates", "from_fit", "priors", "baseline", "run", "file"}
+INPUTS = {"model", "dataset", "runs", "campaign", "candidates", "from_fit", "priors", "baseline", "run", "file",
+          "raw", "rig"}
 FOLDERS = {"out", "report"}
 
 

@@ -4,7 +4,8 @@ One closed grammar, no unit library: a unit is a product of symbols with integer
 (``N*s/m``, ``mm^2``, ``mN/mm``, ``m/s^2``), each symbol an SI symbol of :data:`SYMBOLS`
 (``m s kg g A K N Pa J W C V F ohm Hz rad``) with at most one SI prefix of :data:`PREFIXES`
 (``u``, ``µ`` and ``μ`` all micro), or one of the non-SI units of :data:`OTHER` (``deg``,
-``min``, ``h``).  Anything else is refused, naming what is accepted.  Model cards state coherent
+``min``, ``h``, ``count``: an encoder count, dimensionless, for a rig's ``mm/count`` gain).
+Anything else is refused, naming what is accepted.  Model cards state coherent
 SI units (no prefix), where a power may also be a symbol of the model: :func:`check_model_unit`.
 """
 
@@ -26,8 +27,9 @@ SYMBOLS = {
     "ohm": (1.0, {_M: 1, _L: 2, _T: -3, _I: -2}), "Hz": (1.0, {_T: -1}), "rad": (1.0, {}),
     "1": (1.0, {}), "-": (1.0, {}),
 }
-#: Non-SI units accepted as symbols (no prefix): degree of angle, minute and hour of time
-OTHER = {"deg": (math.pi / 180, {}), "min": (60.0, {_T: 1}), "h": (3600.0, {_T: 1})}
+#: Non-SI units accepted as symbols (no prefix): degree of angle, minute and hour of time, an
+#: encoder count (a raw position channel; its gain is in mm/count)
+OTHER = {"deg": (math.pi / 180, {}), "min": (60.0, {_T: 1}), "h": (3600.0, {_T: 1}), "count": (1.0, {})}
 #: SI prefixes, longest first so that ``da`` is tried before ``d``
 PREFIXES = {"da": 1e1, "T": 1e12, "G": 1e9, "M": 1e6, "k": 1e3, "h": 1e2, "d": 1e-1, "c": 1e-2, "m": 1e-3,
             "u": 1e-6, "µ": 1e-6, "μ": 1e-6, "n": 1e-9, "p": 1e-12, "f": 1e-15}
@@ -124,7 +126,7 @@ def parse_unit(text):
     product = _product(text)
     if product is None:
         raise ValueError(f"unknown unit {text!r}: expected a product of SI units with at most one prefix each "
-                         f"and integer powers, or deg, min, h (e.g. {', '.join(UNITS[1:12])})")
+                         f"and integer powers, or deg, min, h, count (e.g. {', '.join(UNITS[1:12])})")
     return Unit(text, *product)
 
 

@@ -150,6 +150,16 @@ def build_parser():
     s.add_argument("--overwrite", action="store_true", help="replace a card already in --out")
     s.add_argument("--json", action="store_true", help="print the mapping as JSON")
     s.set_defaults(func=_command("skinfit.apps.cli.dataset"))
+    s = sub.add_parser("ingest", help="raw recordings (.mat, .h5, .csv) + a rig file -> a dataset, one row per "
+                                      "stroke with standard errors (docs/from-your-rig.md)")
+    s.add_argument("raw", nargs="+", help="raw recording files (one trial each, or an HDF5 file of trials)")
+    s.add_argument("--rig", required=True, help="the rig file (TOML): channels, gains, filters, strokes")
+    s.add_argument("--out", required=True, help="dataset folder to write (data.csv, dataset.toml, trials.csv)")
+    s.add_argument("--review", action="store_true", help="also write OUT/review/index.html: each trial's traces, "
+                   "the strokes found and kept, the rejected ones with the reason")
+    s.add_argument("--overwrite", action="store_true", help="replace a dataset already in --out")
+    s.add_argument("--json", action="store_true", help="print the outcome as JSON")
+    s.set_defaults(func=_command("skinfit.apps.cli.ingest"))
     s = sub.add_parser("fit", help="fit a model to a dataset: MAP, emcee, summary, result file")
     s.add_argument("model", help="model id (models/<id>.toml) or path")
     s.add_argument("dataset", help="dataset id (datasets/<id>/), its folder or card, or a CSV file with units "
