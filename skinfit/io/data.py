@@ -264,9 +264,11 @@ def split_header(header):
     return (m.group("name").strip(), m.group("unit").strip()) if m else (header.strip(), None)
 
 
-def _columns_from_header(headers, where, model, units):
+def _columns_from_header(headers, where, model, units, si=False):
     """Columns of a CSV without a card: units from ``name [unit]`` headers or ``units``; columns
-    without a unit are categories, except the model's covariates and observables (an error)."""
+    without a unit are categories, except the model's covariates and observables (an error, or
+    with ``si`` in the model's SI unit: a DataFrame for a model made from a Python function, whose
+    covariates are SI by its contract)."""
     units = dict(units or {})
     quantities = set()
     if model is not None:
@@ -284,6 +286,8 @@ def _columns_from_header(headers, where, model, units):
         if unit is not None:
             _unit(unit, where, f"column {h!r}")
             cols.append(Column(h, name, unit, "quantity"))
+        elif name in quantities and si:
+            cols.append(Column(h, name, _example_unit(model, name), "quantity"))
         elif name in quantities:
             raise InputError(where, f"no unit for {name!r}, which model {model.id!r} needs as a quantity: write "
                              f"'{name} [unit]' in the header (e.g. [{_example_unit(model, name)}]) or pass "
@@ -340,7 +344,10 @@ def _load_csv(path, *, model=None, units=None, max_bytes=None):
 def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
                model: str | Model | None = None, id: str = "frame", title: str = "") -> Dataset:
     """A Dataset from a pandas DataFrame, validated as a CSV is: column names may carry their
-    unit (``"normal_force [mN]"``) or ``units`` gives it (column -> unit); values converted to SI."""
+    unit (``"normal_force [mN]"``) or ``units`` gives it (column -> unit); values converted to SI.
+    For a model whose forward model is a Python function ``f(p, x)`` (:meth:`~skinfit.Model.from_function`,
+    or a card naming a ``function``), a column of its covariates and observables without a unit is
+    in the SI unit the model states (the function's contract: SI in, SI out)."""
     if not isinstance(frame, pd.DataFrame):
         raise InputError("DataFrame", f"expected a pandas DataFrame (got {type(frame).__name__})")
     model = _as_model(model)
@@ -352,7 +359,7 @@ def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
         raise InputError(where, "column name appears twice", field=f"column {dup!r}")
     if len(frame) == 0:
         raise InputError(where, "no data rows")
-    columns = _columns_from_header(headers, where, model, units)
+    columns = _columns_from_header(headers, where, model, units, si=getattr(model, "user_function", False))
     table = {}
     for h, (_, col) in zip(headers, frame.items()):
         if pd.api.types.is_numeric_dtype(col.dtype) and not pd.api.types.is_bool_dtype(col.dtype):

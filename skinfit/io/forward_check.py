@@ -41,8 +41,9 @@ def forward_error(model, what):
 
 
 def _call(model, params, x, constants, when):
+    forward = model.forward  # not finding the function (InputError) is said as it is, not as the function's error
     try:
-        return model.forward(params, x, constants)
+        return forward(params, x, constants)
     except Exception as exc:  # any exception of a plug-in's code is its bug, named here in one line
         raise forward_error(model, f"raised {type(exc).__name__}: {str(exc)[:200]} ({when})") from exc
 

@@ -17,9 +17,9 @@ from types import MappingProxyType
 import numpy as np
 
 from skinfit.errors import InputError
-from skinfit.io.models import check_id
+from skinfit.io.arguments import check_id
 from skinfit.io.paths import display
-from skinfit.io.references import check_source
+from skinfit.io.references import check_file_source
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 
 __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "check_physical", "prior_groups",
@@ -289,7 +289,7 @@ def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet
         if key in ("schema_version", "model", "id"):
             continue
         priors[key] = parse_prior(key, spec, where, check_mass)
-        check_source(priors[key].source, where, f"{key}.source")  # a key into references.toml
+        check_file_source(priors[key].source, path, where, f"{key}.source")  # a key of references.toml if shipped
     if not priors:
         raise InputError(where, "no priors defined")
     return PriorSet(id=doc.get("id", path.stem), model=model, priors=MappingProxyType(priors),

@@ -29,7 +29,7 @@ __all__ = ["fit"]
 
 
 def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
-        priors: str | os.PathLike | PriorSet | None = None, *, units: Mapping[str, str] | None = None,
+        priors: str | os.PathLike | PriorSet | Mapping | None = None, *, units: Mapping[str, str] | None = None,
         rng: int | np.random.Generator | None = None, split: Mapping[str, Sequence[str]] | None = None,
         noise: str | Mapping[str, str] | None = None, constants: Mapping[str, float] | None = None,
         nwalkers: int | None = None, ess_target: float = 400, max_steps: int = 20000, progress: bool = False,
@@ -47,8 +47,10 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         (``normal_force [mN]``), or a DataFrame (:func:`skinfit.io.data.from_frame`).
     units : mapping column -> unit, optional
         Units of DataFrame or CSV columns whose name does not carry one (``{"voltage": "V"}``).
-    priors : PriorSet or str, optional
-        Default: ``priors/<model id>.toml``.
+    priors : PriorSet, str or mapping, optional
+        Default: ``priors/<model id>.toml``.  A mapping parameter -> frozen scipy.stats
+        distribution (its support the bounds; :func:`skinfit.truncate` for narrower ones) or
+        prior-file table, with ``sigma`` (and ``nu`` for Student-t noise) for the noise.
     rng : int, None or numpy.random.Generator
         The one source of randomness (SPEC 7); the same seed gives identical samples.  The fit
         draws from it in a fixed order (MAP search, importance start, walkers, sampling, prior

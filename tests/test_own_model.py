@@ -1,0 +1,198 @@
+"""A model of one's own from a Python function (issue 42): ``Model.from_function`` with scipy.stats
+priors fits like a shipped card, recovers the parameters that generated its data, gives bit for
+bit the posterior of the same model written as a card and prior file (``Model.to_card``), is
+saved and loaded in a new process, compared with a shipped model and reported; each mistake a
+user makes is one line naming it."""
+
+import json
+import os
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.stats as st
+from own_model_function import TRUTH, powerlaw_ea, simulate
+
+import skinfit
+from skinfit.errors import ForwardError, InputError
+from skinfit.io.models import parse_model_text
+from skinfit.report.html import write_report
+
+TESTS = Path(__file__).resolve().parent
+UNITS = {"covariates": {"normal_force": "N", "voltage": "V"}, "parameters": {"k": "N^(1-n)", "kappa": "N/V^2", "n": "1"}}
+FAST = {"ess_target": 150, "n_global": 400}  # enough for intervals at this data size, a few seconds a fit
+
+
+def make_model(func=powerlaw_ea, **kw):
+    return skinfit.Model.from_function(func, observable=("tangential_force", "N"), **{**UNITS, **kw})
+
+
+def make_priors():
+    return {"k": st.lognorm(s=1.0, scale=0.5), "kappa": st.halfnorm(scale=1e-5), "n": st.uniform(0.3, 1.0),
+            "sigma": st.halfnorm(scale=0.1)}
+
+
+@pytest.fixture(scope="module")
+def data():
+    return simulate(300, seed=20261128)
+
+
+@pytest.fixture(scope="module")
+def own_fit(data):
+    return skinfit.fit(make_model(), data, priors=make_priors(), rng=1, **FAST)
+
+
+def test_the_card_records_function_and_source_hash():
+    model = make_model()
+    card = tomllib.loads(model.card_text)
+    assert card["function"] == "own_model_function:powerlaw_ea" == model.forward_ref
+    import hashlib
+    import inspect
+
+    assert card["function_sha256"] == hashlib.sha256(inspect.getsource(powerlaw_ea).encode()).hexdigest()
+    assert model.parameter_names == ("k", "kappa", "n") and model.covariate_names == ("normal_force", "voltage")
+    # predict evaluates the function itself: one draw, the closed form at a point
+    y = model.predict({"k": 0.5, "kappa": 2e-6, "n": 0.8}, {"normal_force": np.array([1.0]), "voltage": np.array([100.])})
+    assert y[0] == pytest.approx(0.5 * (1.0 + 2e-6 * 1e4) ** 0.8, rel=1e-14)
+
+
+def test_recovers_generating_parameters(own_fit):
+    """Data simulated at TRUTH (300 rows): each generating value inside the 95% interval."""
+    post = own_fit.idata["posterior"].to_dataset()
+    for name, value in TRUTH.items():
+        lo, hi = np.quantile(post[name].values.ravel(), [0.025, 0.975])
+        assert lo < value < hi, (name, lo, hi, value)
+    assert own_fit.converged
+
+
+def test_function_and_card_give_identical_posteriors(tmp_path, data):
+    model, priors = make_model(), make_priors()
+    files = model.to_card(tmp_path, priors)
+    assert files == {"model": tmp_path / "models" / "powerlaw_ea.toml", "priors": tmp_path / "priors" / "powerlaw_ea.toml"}
+    card_model, card_priors = skinfit.load_model(files["model"]), skinfit.load_priors(files["priors"])
+    assert card_model.function is None and card_model.user_function  # found in the registry, from the file
+    kw = {"ess_target": 60, "n_global": 200}
+    a = skinfit.fit(model, data, priors=priors, rng=7, **kw)
+    b = skinfit.fit(card_model, data, priors=card_priors, rng=7, **kw)
+    pa, pb = a.idata["posterior"].to_dataset(), b.idata["posterior"].to_dataset()
+    for name in ("k", "kappa", "n", "sigma"):
+        assert np.array_equal(pa[name].values, pb[name].values), name
+    # the user's prior file keeps the scipy description as its free-text source, shown as given
+    assert 'source = "scipy.stats.lognorm(s=1.0, loc=0.0, scale=0.5)"' in files["priors"].read_text()
+    with pytest.raises(InputError, match="exists"):
+        model.to_card(tmp_path, priors)
+
+
+def test_truncate_and_prior_file_tables(data):
+    from skinfit.io.user_priors import as_prior_set
+
+    model = make_model()
+    ps = as_prior_set({"k": skinfit.truncate(st.lognorm(s=1.0, scale=0.5), 0.01, 5.0),
+                       "kappa": {"dist": "halfnormal", "scale": 1e-5, "bounds": [0.0, 1e-3]},
+                       "n": st.uniform(0.3, 1.0), "sigma": st.halfnorm(scale=0.1)}, model)
+    assert (ps["k"].lower, ps["k"].upper, ps["k"].dist) == (0.01, 5.0, "lognormal")
+    assert ps["kappa"].source == "given in Python" and ps["n"].upper == 1.3
+    # the truncated prior is scipy's, renormalised on its bounds
+    f = st.lognorm(s=1.0, scale=0.5)
+    x = np.array([0.1, 1.0, 4.0])
+    expected = f.logpdf(x) - np.log(f.cdf(5.0) - f.cdf(0.01))
+    np.testing.assert_allclose(ps["k"].logpdf(x), expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("func, match", [
+    (lambda p, x: p["k"][:, 0] + 0 * x["voltage"][0], r"shape \(3,\); expected \(3, "),
+    (lambda p, x: p["k"] * np.log(x["voltage"] - 300.0), "returned nan"),
+    (lambda p, x: p["k"][0, 0] * x["normal_force"] ** p["n"] + p["kappa"] * x["voltage"], "not vectorised"),
+])
+def test_a_broken_function_is_one_line(data, func, match):
+    model = make_model(func, id="broken")
+    with pytest.raises(ForwardError, match=match) as info:
+        skinfit.fit(model, data, priors=make_priors(), rng=1, **FAST)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("change, error, match", [
+    ({"mu": st.norm(0.5, 0.1)}, InputError, "a prior for 'mu', which model 'powerlaw_ea' does not have"),
+    ({"sigma": None}, InputError, r"no prior for sigma \(model 'powerlaw_ea' needs priors for k, kappa, n, sigma\)"),
+    ({"sigma": {"dist": "uniform", "bounds": [0.0, float("inf")]}}, InputError, "improper: give finite bounds"),
+    ({"sigma": st.norm(0.0, 0.1)}, InputError, r"leave the physical range \[0, inf\] of sigma"),
+    ({"k": st.cauchy(0.5, 1.0)}, InputError, "scipy.stats.cauchy is not a prior family skinfit has"),
+    ({"k": st.lognorm}, InputError, "scipy.stats.lognorm is not frozen"),
+    ({"k": 0.5}, InputError, "expected a frozen scipy.stats distribution"),
+    ({"k": st.lognorm(s=1.0, loc=0.1, scale=0.5)}, InputError, "lognormal prior has loc=0.0"),
+])
+def test_a_wrong_prior_is_one_line(data, change, error, match):
+    priors = {k: v for k, v in {**make_priors(), **change}.items() if v is not None}
+    with pytest.raises(error, match=match) as info:
+        skinfit.fit(make_model(), data, priors=priors, rng=1, **FAST)
+    assert "\n" not in str(info.value)
+
+
+def test_wrong_model_definitions_are_one_line():
+    with pytest.raises(InputError, match="parameter 'voltage' shadows the covariate"):
+        make_model(parameters={"k": "1", "voltage": "1"})
+    with pytest.raises(InputError, match="parameter 'sigma' shadows the noise parameter"):
+        make_model(parameters={"k": "1", "sigma": "N"})
+    with pytest.raises(InputError, match="a lambda.*pass id="):
+        make_model(lambda p, x: p["k"] * x["voltage"])
+    with pytest.raises(InputError, match=r"must take \(p, x\)"):
+        make_model(lambda p, x, c: p["k"], id="three")
+    with pytest.raises(InputError, match="unknown unit"):
+        make_model(parameters={"k": "furlong", "kappa": "1", "n": "1"})
+
+
+def test_function_changed_since_the_fit_is_one_line(own_fit):
+    text = own_fit.attrs["model_card"]
+    recorded = tomllib.loads(text)["function_sha256"]
+    changed = parse_model_text(text.replace(recorded, "0" * 64), "saved fit", "x", saved=True)
+    with pytest.raises(InputError, match="source of own_model_function:powerlaw_ea has changed"):
+        changed.forward
+    moved = parse_model_text(text.replace("own_model_function:", "no_such_module_42:"), "saved fit", "x", saved=True)
+    with pytest.raises(InputError, match="cannot import the model's function no_such_module_42:powerlaw_ea "
+                                         r"\(ModuleNotFoundError.*needed only to evaluate the model again"):
+        moved.forward
+
+
+LOAD = """import json, sys
+import skinfit
+fit = skinfit.load_fit(sys.argv[1])
+try:
+    posterior = fit.posterior.n  # rebuilding the posterior evaluates the model: needs the function
+except skinfit.InputError as exc:
+    posterior = str(exc)
+print(json.dumps({"k": float(fit.summary().loc["k", "mean"]), "posterior": posterior}))
+"""
+
+
+def _load_elsewhere(path, python_path):
+    """What a new process that loads the fit at ``path`` sees, with ``python_path`` its PYTHONPATH."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(python_path), "MPLBACKEND": "Agg"}
+    done = subprocess.run([sys.executable, "-c", LOAD, str(path)], capture_output=True, text=True, env=env,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # the competitor misfits the data, as it should
+def test_save_load_compare_report(tmp_path, own_fit, data):
+    """The function-defined fit saved, loaded in a new process (with the function importable:
+    the model evaluated again; without: the draws, and one line saying what needs the function),
+    compared with electroadhesion_coulomb on the same data, and both reported."""
+    coulomb = skinfit.fit("electroadhesion_coulomb", data, units={"normal_force": "N", "voltage": "V",
+                                                                  "tangential_force": "N"}, rng=1, **FAST)
+    own_fit.save(tmp_path / "own")
+    coulomb.save(tmp_path / "coulomb")
+    table = skinfit.compare([own_fit, coulomb])
+    assert table.index[0] == "powerlaw_ea"  # the model that made the data wins
+    root = str(TESTS.parent)
+    seen = _load_elsewhere(tmp_path / "own", [root, str(TESTS)])
+    assert seen["posterior"] == 300 and seen["k"] == pytest.approx(float(own_fit.summary().loc["k", "mean"]))
+    seen = _load_elsewhere(tmp_path / "own", [root])
+    assert seen["posterior"].startswith("model card saved in fit (powerlaw_ea): function: cannot import the model's "
+                                        "function own_model_function:powerlaw_ea (ModuleNotFoundError")
+    write_report([tmp_path / "own", tmp_path / "coulomb"], tmp_path / "report", comparison=table)
+    html = (tmp_path / "report" / "index.html").read_text()
+    assert "powerlaw_ea" in html and "electroadhesion_coulomb" in html
