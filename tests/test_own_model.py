@@ -176,23 +176,80 @@ def _load_elsewhere(path, python_path):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.filterwarnings("ignore::UserWarning")  # the competitor misfits the data, as it should
-def test_save_load_compare_report(tmp_path, own_fit, data):
-    """The function-defined fit saved, loaded in a new process (with the function importable:
-    the model evaluated again; without: the draws, and one line saying what needs the function),
-    compared with electroadhesion_coulomb on the same data, and both reported."""
-    coulomb = skinfit.fit("electroadhesion_coulomb", data, units={"normal_force": "N", "voltage": "V",
-                                                                  "tangential_force": "N"}, rng=1, **FAST)
-    own_fit.save(tmp_path / "own")
-    coulomb.save(tmp_path / "coulomb")
-    table = skinfit.compare([own_fit, coulomb])
-    assert table.index[0] == "powerlaw_ea"  # the model that made the data wins
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory, own_fit, data):
+    """The function-defined fit and electroadhesion_coulomb's on the same data, saved, and their
+    comparison."""
+    folder = tmp_path_factory.mktemp("fits")
+    with pytest.warns(UserWarning):  # the competitor misfits the data, as it should
+        coulomb = skinfit.fit("electroadhesion_coulomb", data, units={"normal_force": "N", "voltage": "V",
+                                                                      "tangential_force": "N"}, rng=1, **FAST)
+    own_fit.save(folder / "own")
+    coulomb.save(folder / "coulomb")
+    return folder, skinfit.compare([own_fit, coulomb])
+
+
+def test_compare_with_a_shipped_model(saved):
+    table = saved[1]
+    assert list(table.index) == ["powerlaw_ea", "electroadhesion_coulomb"]  # the model that made the data wins
+    assert table["log_z"].iloc[0] - table["log_z"].iloc[1] > 100 * table["log_z_se"].max()
+
+
+def test_loaded_in_a_new_process(saved, own_fit):
+    """With the function importable the model is evaluated again; without it the draws are there,
+    and one line says what needs the function."""
     root = str(TESTS.parent)
-    seen = _load_elsewhere(tmp_path / "own", [root, str(TESTS)])
+    seen = _load_elsewhere(saved[0] / "own", [root, str(TESTS)])
     assert seen["posterior"] == 300 and seen["k"] == pytest.approx(float(own_fit.summary().loc["k", "mean"]))
-    seen = _load_elsewhere(tmp_path / "own", [root])
+    seen = _load_elsewhere(saved[0] / "own", [root])
     assert seen["posterior"].startswith("model card saved in fit (powerlaw_ea): function: cannot import the model's "
                                         "function own_model_function:powerlaw_ea (ModuleNotFoundError")
-    write_report([tmp_path / "own", tmp_path / "coulomb"], tmp_path / "report", comparison=table)
+    assert seen["k"] == pytest.approx(float(own_fit.summary().loc["k", "mean"]))
+
+
+def test_report_of_both(saved, tmp_path, no_figures):
+    write_report([saved[0] / "own", saved[0] / "coulomb"], tmp_path / "report", comparison=saved[1])
     html = (tmp_path / "report" / "index.html").read_text()
-    assert "powerlaw_ea" in html and "electroadhesion_coulomb" in html
+    assert "powerlaw_ea" in html and "electroadhesion_coulomb" in html and "Python function" in html
+
+
+@pytest.mark.slow
+def test_report_of_both_with_figures(saved, tmp_path):
+    """The report's figures drawn (~40 s on a loaded 2-core machine): the function is evaluated
+    for the predictive figures of the function-defined fit, in the model's units."""
+    write_report([saved[0] / "own", saved[0] / "coulomb"], tmp_path / "report", comparison=saved[1])
+    figures = {p.name for p in (tmp_path / "report" / "figures").rglob("*") if p.is_file()}
+    assert any("powerlaw_ea" in name for name in figures), sorted(figures)
+
+
+def test_a_prior_file_refuses_scipy_names_in_one_line(tmp_path):
+    """Prior files take skinfit's documented names (lognormal: median, sigma); scipy's own (s,
+    scale) are refused naming the expected ones and the translation; Python takes scipy's."""
+    bad = tmp_path / "priors" / "powerlaw_ea.toml"
+    bad.parent.mkdir()
+    bad.write_text('schema_version = 1\nmodel = "powerlaw_ea"\n\n[k]\ndist = "lognormal"\ns = 1.0\nscale = 0.5\n'
+                   'bounds = [0.0, inf]\nsource = "my notes"\n')
+    with pytest.raises(InputError, match=r"powerlaw_ea.toml: k: unexpected keys \['s', 'scale'\] for a lognormal "
+                                         r"prior \(expected median, sigma, bounds, source; scipy's lognorm\(s, scale\) "
+                                         r"is lognormal median = scale, sigma = s\)") as info:
+        skinfit.load_priors(bad)
+    assert "\n" not in str(info.value)
+
+
+def test_priors_as_a_user_writes_them_give_the_same_priors():
+    """``skinfit priors`` shows each prior as a prior-file entry and as Python; the Python form,
+    typed back in, is the shipped prior (family, arguments, bounds)."""
+    from skinfit.io.user_priors import as_prior_set, as_written
+
+    shipped = skinfit.load_priors("electroadhesion_coulomb")
+    assert as_written(shipped["E_star"]) == (
+        'dist = "lognormal", median = 40000.0, sigma = 0.6, bounds = [2000.0, 100000.0]',
+        "skinfit.truncate(st.lognorm(s=0.6, scale=40000.0), 2000.0, 100000.0)")
+    assert as_written(shipped["sigma"])[1] == "skinfit.truncate(st.halfnorm(scale=0.05), 0.0, 1.0)"
+    model = skinfit.load_model("electroadhesion_coulomb")
+    typed = as_prior_set({"E_star": skinfit.truncate(st.lognorm(s=0.6, scale=40000.0), 2000.0, 100000.0),
+                          "mu": skinfit.truncate(st.norm(loc=0.5, scale=0.3), 0.0, 2.0),
+                          "sigma": skinfit.truncate(st.halfnorm(scale=0.05), 0.0, 1.0)}, model)
+    for name in typed:
+        a, b = typed[name], shipped[name]
+        assert (a.dist, dict(a.args), a.lower, a.upper) == (b.dist, dict(b.args), b.lower, b.upper), name

@@ -23,7 +23,7 @@ from skinfit.io.arguments import shown
 from skinfit.io.priors import PriorSet, parse_prior
 
 __all__ = ["truncate", "Truncated", "SCIPY_FAMILIES", "as_prior_set", "prior_file_text", "toml_value",
-           "noise_names_possible"]
+           "noise_names_possible", "as_written"]
 
 #: scipy.stats family -> (prior-file family, its arguments from scipy's {shape, loc, scale}, the
 #: arguments that must keep scipy's default, support(arguments) -> (lower, upper)).
@@ -187,3 +187,30 @@ def prior_file_text(model_id, priors):
         lines += [f"{k} = {toml_value(float(v))}" for k, v in p.args.items()]
         lines += [f"bounds = {toml_value([float(p.lower), float(p.upper)])}", f"source = {toml_value(p.source)}"]
     return "\n".join(lines) + "\n"
+
+
+# prior-file family -> (scipy name, its arguments from the prior's, its support from its arguments)
+_TO_SCIPY = {
+    "normal": ("norm", lambda a, lo, hi: {"loc": a["loc"], "scale": a["scale"]}, lambda a: (-math.inf, math.inf)),
+    "halfnormal": ("halfnorm", lambda a, lo, hi: {"scale": a["scale"]}, lambda a: (0.0, math.inf)),
+    "lognormal": ("lognorm", lambda a, lo, hi: {"s": a["sigma"], "scale": a["median"]}, lambda a: (0.0, math.inf)),
+    "uniform": ("uniform", lambda a, lo, hi: {"loc": lo, "scale": hi - lo}, None),
+    "loguniform": ("loguniform", lambda a, lo, hi: {"a": lo, "b": hi}, None),
+    "gamma": ("gamma", lambda a, lo, hi: {"a": a["shape"], "scale": a["scale"]}, lambda a: (0.0, math.inf)),
+    "beta": ("beta", lambda a, lo, hi: {"a": a["a"], "b": a["b"]}, lambda a: (0.0, 1.0)),
+}
+
+
+def as_written(prior):
+    """``(prior-file entry, Python)`` of a :class:`~skinfit.io.priors.Prior` as a user writes it:
+    ``'dist = "lognormal", median = 0.5, sigma = 1.0, bounds = [0.0, inf]'`` and
+    ``"st.lognorm(s=1.0, scale=0.5)"`` (in ``skinfit.truncate(..., lower, upper)`` when its
+    bounds are narrower than the distribution's support)."""
+    entry = ", ".join([f"dist = {toml_value(prior.dist)}", *(f"{k} = {toml_value(float(v))}"
+                                                              for k, v in prior.args.items()),
+                       f"bounds = {toml_value([float(prior.lower), float(prior.upper)])}"])
+    name, args, support = _TO_SCIPY[prior.dist]
+    dist = f"st.{name}(" + ", ".join(f"{k}={v!r}" for k, v in args(prior.args, prior.lower, prior.upper).items()) + ")"
+    if support is not None and support(prior.args) != (prior.lower, prior.upper):
+        dist = f"skinfit.truncate({dist}, {prior.lower!r}, {prior.upper!r})"
+    return entry, dist
