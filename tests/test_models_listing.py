@@ -35,8 +35,8 @@ GOOD_CARD = textwrap.dedent('''\
 
 @pytest.fixture
 def broken_plugins(tmp_path):
-    """Two installed plug-ins: ``listing_plug`` with a good card and a card naming a function it
-    does not register, and ``listing_gone``, whose entry point names a module that is not there."""
+    """Two installed plug-ins: ``listing_plug`` with two good cards (one naming a forward function,
+    one a plain ``f(p, x)``) and a card naming a function it does not register, and ``listing_gone``, whose entry point names a module that is not there."""
     site = tmp_path / "site"
     (site / "listing_plug" / "cards" / "models").mkdir(parents=True)
     (site / "listing_plug" / "__init__.py").write_text(textwrap.dedent('''\
@@ -46,12 +46,18 @@ def broken_plugins(tmp_path):
         def linear(p, x, c):
             return {"tangential_force": p["mu"] * x["normal_force"]}, np.ones((1, 1), bool)
 
-        CARDS = {"forward": {"listing_linear": linear}, "folder": Path(__file__).parent / "cards"}
+        def power(p, x):
+            return p["mu"] * x["normal_force"] ** 0.8
+
+        CARDS = {"forward": {"listing_linear": linear}, "function": {"listing_power": power},
+                 "folder": Path(__file__).parent / "cards"}
         '''))
     models = site / "listing_plug" / "cards" / "models"
     (models / "listing_good.toml").write_text(GOOD_CARD)
     (models / "listing_bad.toml").write_text(GOOD_CARD.replace("listing_good", "listing_bad")
                                              .replace("listing_plug:linear", "listing_plug:quadratic"))
+    (models / "listing_own.toml").write_text(GOOD_CARD.replace("listing_good", "listing_own").replace(
+        'forward = "listing_plug:linear"', 'function = "listing_plug:power"'))  # a user's f(p, x), as to_card writes
     for name, value in (("listing_plug", "listing_plug:CARDS"), ("listing_gone", "listing_gone_module:CARDS")):
         info = site / f"{name}-1.0.dist-info"
         info.mkdir()
@@ -74,6 +80,7 @@ def test_a_broken_card_and_plugin_are_named_not_fatal(broken_plugins, capsys):
     out, err = capsys.readouterr()
     assert "listing_good: A plug-in model that reads" in out and "source: my notes, eq. 1" in out
     assert "electroadhesion:" in out and "listing_bad:" not in out  # the shipped ones are listed too
+    assert "listing_own: A plug-in model that reads" in out  # a card naming a plug-in's f(p, x)
     warnings = err.strip().splitlines()
     assert len(warnings) == 2, err
     assert any("listing_gone" in w and "fails to import: ModuleNotFoundError" in w for w in warnings)

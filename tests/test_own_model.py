@@ -103,8 +103,11 @@ def test_truncate_and_prior_file_tables(data):
 
 
 @pytest.mark.parametrize("func, match", [
-    (lambda p, x: p["k"][:, 0] + 0 * x["voltage"][0], r"shape \(3,\); expected \(3, "),
-    (lambda p, x: p["k"] * np.log(x["voltage"] - 300.0), "returned nan"),
+    (lambda p, x: p["k"][:, 0] + 0 * x["voltage"][0],
+     r"^model from function <lambda>: function: test_own_model:<lambda>: returned 'tangential_force' of shape "
+     r"\(3,\); expected \(3, 300\)"),
+    (lambda p, x: p["k"] * np.log(x["voltage"] - 300.0),
+     "returned nan .*narrow the priors to where the model is defined"),
     (lambda p, x: p["k"][0, 0] * x["normal_force"] ** p["n"] + p["kappa"] * x["voltage"], "not vectorised"),
 ])
 def test_a_broken_function_is_one_line(data, func, match):

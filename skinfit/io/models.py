@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # pandas in annotations only: ``skinfit models`` does without
 
 from skinfit.errors import InputError, InputTypeError, SupportWarning
 from skinfit.io.arguments import check_id, check_mapping, check_path, shown
-from skinfit.io.forward_check import forward_error, validated
+from skinfit.io.forward_check import forward_error, undefined_hint, validated
 from skinfit.io.paths import display
 from skinfit.io.references import check_file_source
 from skinfit.io.registry import lookup, register, resolve
@@ -108,6 +108,11 @@ class Model:
         observable -> (k, n) array.  It is checked on a few prior draws before a fit (shape,
         finiteness, vectorisation over draws).
 
+        The model is recorded by the function's ``module:qualname`` and the sha256 of its source
+        (none for a function Python has no source for); a saved fit needs the function only to
+        evaluate the model again.  The function is registered (role ``function``) in this
+        process, so the card :meth:`to_card` writes loads here as well (docs/own-model.md).
+
         Parameters
         ----------
         observable : (name, unit) or (name, unit, noise), a sequence of them, or a mapping name -> unit
@@ -116,11 +121,6 @@ class Model:
             SI units; a power may name a parameter (``"N^(1-n)"``).
         id, title, source : str, optional
             Default: the function's name; a title naming it; ``source`` free text (your paper).
-
-        The model is recorded by the function's ``module:qualname`` and the sha256 of its source
-        (none for a function Python has no source for); a saved fit needs the function only to
-        evaluate the model again.  The function is registered (role ``function``) in this
-        process, so the card :meth:`to_card` writes loads here as well.
         """
         return function_model(cls, func, observable, covariates, parameters, id, title, source)
 
@@ -211,7 +211,7 @@ class Model:
             if (valid & ~np.isfinite(arr)).any():
                 i, j = np.argwhere(valid & ~np.isfinite(arr))[0]
                 raise forward_error(self, f"returned {arr[i, j]} for {name!r} at row {j + 1} of draw {i + 1}, a point "
-                                          "it marks valid (ok True): return ok False where the model is undefined")
+                                          f"it marks valid (ok True): {undefined_hint(self)}")
             arr[~valid] = np.nan  # (a new array: validated() copies)
             out[name] = arr[0] if scalar else arr
         valid = valid[0] if scalar else valid
