@@ -256,3 +256,17 @@ def test_priors_as_a_user_writes_them_give_the_same_priors():
     for name in typed:
         a, b = typed[name], shipped[name]
         assert (a.dist, dict(a.args), a.lower, a.upper) == (b.dist, dict(b.args), b.lower, b.upper), name
+
+
+def test_the_executed_tutorial_runs_and_recovers_its_truth():
+    """docs/tutorials/own-model.ipynb (executed by the docs build) runs as written, as a kernel
+    would (one namespace, module ``__main__``), and its intervals hold the values it simulated from."""
+    notebook = TESTS.parent / "docs" / "tutorials" / "own-model.ipynb"
+    ns = {"__name__": "__main__"}
+    for cell in json.loads(notebook.read_text())["cells"]:
+        if cell["cell_type"] == "code":
+            exec(compile("".join(cell["source"]), str(notebook), "exec"), ns)
+    summary, truth = ns["summary"], ns["truth"]
+    assert ns["fit"].converged and ns["model"].forward_ref == "__main__:powerlaw_ea"
+    for name, value in truth.items():
+        assert summary.loc[name, "hdi_3%"] < value < summary.loc[name, "hdi_97%"], name
