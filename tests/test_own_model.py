@@ -270,3 +270,32 @@ def test_the_executed_tutorial_runs_and_recovers_its_truth():
     assert ns["fit"].converged and ns["model"].forward_ref == "__main__:powerlaw_ea"
     for name, value in truth.items():
         assert summary.loc[name, "hdi_3%"] < value < summary.loc[name, "hdi_97%"], name
+
+
+def test_several_observables_from_a_dict():
+    """A function returning a dict serves several observables: predictions by name, and noise
+    parameters named per observable (the prior error lists them)."""
+    def contact(p, x):
+        return {"tangential_force": p["mu"] * x["normal_force"], "area": p["a"] * np.sqrt(x["normal_force"]) + 0 * p["mu"]}
+
+    model = skinfit.Model.from_function(contact, observable={"tangential_force": "N", "area": "m^2"},
+                                        covariates={"normal_force": "N"}, parameters={"mu": "1", "a": "m^2/N"})
+    y = model.predict({"mu": 0.5, "a": 1e-4}, {"normal_force": np.array([1.0, 4.0])})
+    np.testing.assert_array_equal(y["tangential_force"], [0.5, 2.0])
+    np.testing.assert_array_equal(y["area"], [1e-4, 2e-4])
+    frame = simulate(10, seed=1).drop(columns="voltage").assign(area=1e-4)
+    with pytest.raises(InputError, match="a prior for 'sigma', which model 'contact' does not have .*noise: "
+                                         "sigma_tangential_force, nu_tangential_force, sigma_area, nu_area"):
+        skinfit.fit(model, frame, priors={"mu": st.uniform(0, 2), "a": st.uniform(0, 1e-3), "sigma": st.halfnorm()})
+
+
+def test_group_fits_from_python(tmp_path):
+    """``fit_by`` (the CLI's ``--by``) takes the function-defined model and its scipy priors."""
+    from skinfit.io.data import from_frame
+
+    model = make_model()
+    frame = simulate(80, seed=3).assign(subject=["S1", "S2"] * 40)
+    index = skinfit.fit_by(model, from_frame(frame, model=model), "subject", tmp_path / "by", priors=make_priors(),
+                           seed=1, ess_target=60, n_global=200)
+    assert list(index["status"]) == ["done", "done"] and list(index["rows"]) == [40, 40]
+    assert sorted(skinfit.load_groups(tmp_path / "by")) == ["subject=S1", "subject=S2"]
