@@ -299,3 +299,18 @@ def test_group_fits_from_python(tmp_path):
                            seed=1, ess_target=60, n_global=200)
     assert list(index["status"]) == ["done", "done"] and list(index["rows"]) == [40, 40]
     assert sorted(skinfit.load_groups(tmp_path / "by")) == ["subject=S1", "subject=S2"]
+
+
+def test_a_card_naming_an_unregistered_function_is_one_line(tmp_path):
+    """A card file names only registered code: its ``function`` is found in the registry (a
+    plug-in's entry point, or from_function in this process), never imported from the card."""
+    text = make_model().card_text
+    card = tmp_path / "models" / "powerlaw_ea.toml"
+    card.parent.mkdir()
+    card.write_text(text.replace("own_model_function:powerlaw_ea", "os:getcwd"))
+    with pytest.raises(InputError, match="function: 'os:getcwd' is not a registered model function f\\(p, x\\)"):
+        skinfit.load_model(card)
+    card.write_text(text.replace('function = "', 'forward = "skinfit.physics.electroadhesion:electroadhesion"\n'
+                                                 'function = "'))
+    with pytest.raises(InputError, match="expected either forward = .* or function = .*, not both"):
+        skinfit.load_model(card)

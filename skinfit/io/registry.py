@@ -193,9 +193,11 @@ def resolve(role, ref, where, field=None):
             raise InputError(where, f"{ref!r} is registered as a {other[0]} function, not a {role} function "
                              f"(registered {role} functions: {', '.join(registered(role))})", field=field)
         broken = f"; left out: {'; '.join(plugin_problems())}" if plugin_problems() else ""
-        raise InputError(where, f"{ref!r} is not a registered {role} function (registered: "
-                         f"{', '.join(registered(role))}; a package adds its own through the "
-                         f"{ENTRY_POINT_GROUP!r} entry point{broken})", field=field)
+        what = "model function f(p, x)" if role == "function" else f"{role} function"
+        known = ", ".join(registered(role)) or "none"
+        here = " or skinfit.Model.from_function in this process" if role == "function" else ""
+        raise InputError(where, f"{ref!r} is not a registered {what} (registered: {known}; a package adds its own "
+                         f"through the {ENTRY_POINT_GROUP!r} entry point{here}{broken})", field=field)
     func = entry.function
     if func is None:
         module, _, name = entry.ref.partition(":")
