@@ -314,3 +314,15 @@ def test_a_card_naming_an_unregistered_function_is_one_line(tmp_path):
                                                  'function = "'))
     with pytest.raises(InputError, match="expected either forward = .* or function = .*, not both"):
         skinfit.load_model(card)
+
+
+def test_a_card_whose_function_changed_says_how_to_mend_it(tmp_path):
+    card = tmp_path / "models" / "powerlaw_ea.toml"
+    card.parent.mkdir()
+    text = make_model().card_text
+    card.write_text(text.replace(tomllib.loads(text)["function_sha256"], "1" * 64))
+    with pytest.raises(InputError, match=r"function_sha256: the source of own_model_function:powerlaw_ea has "
+                                         r"changed .*write the card again \(Model.to_card\)"):
+        skinfit.load_model(card)
+    card.write_text(text.replace(f'function_sha256 = "{tomllib.loads(text)["function_sha256"]}"\n', ""))
+    assert skinfit.load_model(card).function_sha256 == ""  # deleted: nothing checked

@@ -459,7 +459,7 @@ def user_forward(model):
             func = import_function(model.forward_ref, model.function_sha256, model.path)
         else:
             func = check_source_hash(resolve("function", model.forward_ref, model.path), model.forward_ref,
-                                     model.function_sha256, model.path)
+                                     model.function_sha256, model.path, model.saved)
         _USER_FORWARDS[key] = adapt(func, model.observable_names, model.forward_ref, model.path)
     return _USER_FORWARDS[key]
 

@@ -71,14 +71,18 @@ def adapt(func, observables, ref, where):
     return forward
 
 
-def check_source_hash(func, ref, recorded, where):
+_REFIT = "predictions would not be those of the model fitted; restore the function, or refit"
+_REWRITE = "write the card again (Model.to_card), or delete its function_sha256 to check nothing"
+
+
+def check_source_hash(func, ref, recorded, where, saved=True):
     """InputError naming ``where`` when ``func``'s source differs from the ``recorded`` sha256
-    (nothing to check when either is unknown)."""
+    (nothing to check when either is unknown); the remedy for a fit's card (``saved``) or a card file."""
     now = source_sha256(func)
     if recorded and now and now != recorded:
         raise InputError(where, f"the source of {ref} has changed since it was recorded (sha256 {recorded[:12]}... "
-                                f"recorded, {now[:12]}... now): predictions would not be those of the model "
-                                "fitted; restore the function, or refit", field="function_sha256")
+                                f"recorded, {now[:12]}... now): {_REFIT if saved else _REWRITE}",
+                         field="function_sha256")
     return func
 
 
