@@ -159,22 +159,29 @@ def test_function_changed_since_the_fit_is_one_line(own_fit):
         moved.forward
 
 
-LOAD = """import json, sys
+LOAD = """import importlib, json, sys
 import skinfit
-fit = skinfit.load_fit(sys.argv[1])
-try:
-    posterior = fit.posterior.n  # rebuilding the posterior evaluates the model: needs the function
-except skinfit.InputError as exc:
-    posterior = str(exc)
-print(json.dumps({"k": float(fit.summary().loc["k", "mean"]), "posterior": posterior}))
+seen = []
+for step in ("without", "with"):  # the function's module first off the path, then on it
+    if step == "with":
+        sys.path.insert(0, sys.argv[2])
+        importlib.invalidate_caches()
+    fit = skinfit.load_fit(sys.argv[1])
+    try:
+        posterior = fit.posterior.n  # rebuilding the posterior evaluates the model: needs the function
+    except skinfit.InputError as exc:
+        posterior = str(exc)
+    seen.append({"k": float(fit.summary().loc["k", "mean"]), "posterior": posterior})
+print(json.dumps(seen))
 """
 
 
-def _load_elsewhere(path, python_path):
-    """What a new process that loads the fit at ``path`` sees, with ``python_path`` its PYTHONPATH."""
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(python_path), "MPLBACKEND": "Agg"}
-    done = subprocess.run([sys.executable, "-c", LOAD, str(path)], capture_output=True, text=True, env=env,
-                          timeout=300)
+def _load_elsewhere(path):
+    """What a new process that loads the fit at ``path`` sees without the function's module on
+    its path, then with it."""
+    env = {**os.environ, "PYTHONPATH": str(TESTS.parent), "MPLBACKEND": "Agg"}
+    done = subprocess.run([sys.executable, "-c", LOAD, str(path), str(TESTS)], capture_output=True, text=True,
+                          env=env, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -199,15 +206,14 @@ def test_compare_with_a_shipped_model(saved):
 
 
 def test_loaded_in_a_new_process(saved, own_fit):
-    """With the function importable the model is evaluated again; without it the draws are there,
-    and one line says what needs the function."""
-    root = str(TESTS.parent)
-    seen = _load_elsewhere(saved[0] / "own", [root, str(TESTS)])
-    assert seen["posterior"] == 300 and seen["k"] == pytest.approx(float(own_fit.summary().loc["k", "mean"]))
-    seen = _load_elsewhere(saved[0] / "own", [root])
-    assert seen["posterior"].startswith("model card saved in fit (powerlaw_ea): function: cannot import the model's "
-                                        "function own_model_function:powerlaw_ea (ModuleNotFoundError")
-    assert seen["k"] == pytest.approx(float(own_fit.summary().loc["k", "mean"]))
+    """Without the function importable the draws are there, and one line says what needs the
+    function; with it the model is evaluated again."""
+    without, with_function = _load_elsewhere(saved[0] / "own")
+    k = float(own_fit.summary().loc["k", "mean"])
+    assert without["posterior"].startswith("model card saved in fit (powerlaw_ea): function: cannot import the "
+                                           "model's function own_model_function:powerlaw_ea (ModuleNotFoundError")
+    assert without["k"] == pytest.approx(k)
+    assert with_function["posterior"] == 300 and with_function["k"] == pytest.approx(k)
 
 
 def test_report_of_both(saved, tmp_path, no_figures):
