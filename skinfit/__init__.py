@@ -19,6 +19,7 @@ _PUBLIC = {
     "PriorSet": "skinfit.io.priors", "load_priors": "skinfit.io.priors", "list_priors": "skinfit.io.priors",
     "Dataset": "skinfit.io.data", "load_dataset": "skinfit.io.data", "list_datasets": "skinfit.io.data",
     "ingest": "skinfit.io.recordings.ingest",
+    "truncate": "skinfit.io.user_priors",
     # fitting and its result
     "fit": "skinfit.results.fitting", "Fit": "skinfit.results.fit", "load_fit": "skinfit.results.fit",
     # analyses of fits

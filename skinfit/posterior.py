@@ -12,7 +12,7 @@ import numpy as np
 
 from skinfit.errors import InputError
 from skinfit.io.data import check_units
-from skinfit.io.forward_check import check_forward, check_quantiles, forward_error
+from skinfit.io.forward_check import check_forward, check_quantiles, forward_error, undefined_hint
 from skinfit.io.known_se import covariate_se, observable_se
 from skinfit.io.labels import level_labels, noise_parameter_names, noise_suffix
 from skinfit.io.models import resolve_constants, resolve_forward, resolve_noise, resolve_split
@@ -560,8 +560,7 @@ class Posterior:
                 if np.isnan(value):
                     return forward_error(self.model, f"returned nan for {o!r} at data row {r + 1} with parameters "
                                                      f"{{{point}}}, a point it marks valid (ok True), while fitting: "
-                                                     "return ok False where the model is undefined, or fix the "
-                                                     "function")
+                                                     f"{undefined_hint(self.model)}")
                 return forward_error(self.model, f"NaN log-likelihood for {o!r} at data row {r + 1} (prediction "
                                                  f"{value:g}) with parameters {{{point}}}, while fitting")
         return forward_error(self.model, f"NaN log-likelihood at parameters {{{point}}} while fitting")

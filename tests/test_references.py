@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 import skinfit
-from skinfit.io.references import check_source, cite, parse_source, references
+from skinfit.io.references import check_file_source, check_source, cite, parse_source, references
 
 ROOT = Path(skinfit.__file__).resolve().parents[1]
 FILES = sorted([*ROOT.glob("models/*.toml"), *ROOT.glob("priors/*.toml")])
@@ -50,14 +50,21 @@ def test_no_seed_file_numbers_anywhere_users_read():
             assert not pattern.search(path.read_text(errors="replace")), path
 
 
-def test_an_unknown_key_is_refused_at_load(tmp_path):
+def test_a_shipped_file_cites_keys_a_users_may_cite_free_text(tmp_path):
+    """Shipped cards and prior files cite keys of references.toml (refused otherwise); a user's
+    own file may give free text, recorded and shown as given (issue 42)."""
     text = (ROOT / "priors" / "electroadhesion.toml").read_text()
     bad = tmp_path / "bad.toml"
     bad.write_text(text.replace('source = "electroadhesion_friction, Table I range 2-100 kPa',
                                 'source = "electroadhesion2020, Table I range 2-100 kPa', 1))
     assert bad.read_text() != text
-    with pytest.raises(skinfit.InputError, match=r"bad.toml: E_star.source: .*reference key.*'electroadhesion2020'"):
-        skinfit.load_priors(str(bad))
+    source = skinfit.load_priors(str(bad))["E_star"].source
+    assert source.startswith("electroadhesion2020, Table I range") and cite(source).startswith(source[:33])
+    shipped = ROOT / "priors" / "electroadhesion.toml"
+    with pytest.raises(skinfit.InputError, match=r"electroadhesion.toml: E_star.source: .*reference key.*"
+                                                 r"'electroadhesion2020'"):
+        check_file_source(source, shipped, "priors/electroadhesion.toml", "E_star.source")
+    assert check_file_source("Smith et al. 2020, eq. 3", bad, "bad.toml", "source") == "Smith et al. 2020, eq. 3"
     with pytest.raises(skinfit.InputError, match="expected a reference key .*got 'Smith et al. 2020, eq. 3'"):
         check_source("Smith et al. 2020, eq. 3", "card.toml", "source")
 

@@ -48,8 +48,9 @@ from skinfit.io.arguments import (
 )
 from skinfit.io.data import Dataset, as_dataset
 from skinfit.io.models import Model, load_model
-from skinfit.io.priors import PriorSet, load_priors
+from skinfit.io.priors import PriorSet, list_priors, load_priors
 from skinfit.io.provenance import input_record, warn_shadows
+from skinfit.io.user_priors import as_prior_set
 from skinfit.posterior import Posterior
 
 __all__ = ["Run", "run", "resolve_inputs", "start", "default_walkers", "check_sizes", "memory_budget",
@@ -179,11 +180,18 @@ def run(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
 def resolve_inputs(model, dataset, priors=None, *, units=None, columns=None):
     """The Model, Dataset and PriorSet :func:`run` fits, from what it accepts: ids, paths or
     loaded objects; the priors default to the model's prior file. Loaded objects pass through,
-    so a caller that resolves them first (to check them) loads nothing twice."""
+    so a caller that resolves them first (to check them) loads nothing twice; a mapping of priors
+    given in Python becomes a PriorSet (:func:`skinfit.io.user_priors.as_prior_set`)."""
     model = model if isinstance(model, Model) else load_model(model)
     dataset = as_dataset(dataset, model=model, units=units, columns=columns)
+    if isinstance(priors, Mapping):
+        return model, dataset, as_prior_set(priors, model)
     if not (priors is None or isinstance(priors, PriorSet)):
-        check_path(priors, "priors", None, "a PriorSet, a prior file id or the path of a prior file")
+        check_path(priors, "priors", None, "a PriorSet, a mapping parameter -> scipy.stats distribution, a prior "
+                                           "file id or the path of a prior file")
+    if priors is None and model.function is not None and model.id not in list_priors():
+        raise InputError("fit", f"model {model.id!r} was made from a Python function and has no prior file: pass "
+                                "priors={name: scipy.stats distribution} (sigma for the noise too)", field="priors")
     priors = priors if isinstance(priors, PriorSet) else load_priors(model.id if priors is None else priors)
     return model, dataset, priors
 

@@ -10,6 +10,7 @@ would exhaust memory are refused with an estimate (:func:`check_memory`).
 import math
 import numbers
 import os
+import re
 import stat
 import sys
 from collections.abc import Mapping
@@ -19,7 +20,7 @@ from skinfit.errors import InputError, InputTypeError
 
 __all__ = ["file_kind", "check_count", "check_number", "check_flag", "check_seed", "as_generator", "check_path",
            "check_input_file", "check_output_file", "check_output_folder", "check_memory", "check_mapping",
-           "available_memory", "size_text", "frame_type_error"]
+           "available_memory", "size_text", "frame_type_error", "check_id"]
 
 
 def shown(value, limit=60):
@@ -220,3 +221,14 @@ def frame_type_error(value, where, name=None):
         hint = "pass a pandas DataFrame"
     shown = kind.__name__ if kind.__module__ == "builtins" else f"{kind.__module__.split('.')[0]}.{kind.__name__}"
     return InputTypeError(where, f"got a {shown}: {hint}", field=name)
+
+
+_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,127}")
+
+
+def check_id(value, where, field="id"):
+    """An id is a name (it becomes a folder or file name): letters, digits, ``_ . + -``, no path."""
+    if not isinstance(value, str) or not _ID.fullmatch(value) or ".." in value:
+        raise InputError(where, f"expected a name of letters, digits, '_', '.', '+', '-' (no '/', '..' or "
+                         f"spaces; it names files and folders) (got {value!r})", field=field)
+    return value

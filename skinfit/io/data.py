@@ -270,11 +270,12 @@ def _data_file(card, file, where):
     return path
 
 
-def _columns_from_header(headers, where, model, units, columns=None, file_units=None):
+def _columns_from_header(headers, where, model, units, columns=None, file_units=None, si=False):
     """Columns of a table without a card: units from ``name [unit]`` headers, ``units``
     (header or name -> unit) or the file (``file_units``, header -> unit); ``columns`` (header ->
     skinfit name) renames headers, whose ``(unit)`` is then read too.  Columns without a unit are
-    categories, except the model's covariates and observables (an error)."""
+    categories, except the model's covariates and observables (an error, or with ``si`` in the
+    model's SI unit: a model made from a Python function, whose covariates are SI by its contract)."""
     units, columns, file_units = dict(units or {}), dict(columns or {}), dict(file_units or {})
     quantities = set()
     if model is not None:
@@ -295,6 +296,8 @@ def _columns_from_header(headers, where, model, units, columns=None, file_units=
         if unit is not None:
             _unit(unit, where, f"column {h!r}")
             cols.append(Column(h, name, unit, "quantity"))
+        elif name in quantities and si:
+            cols.append(Column(h, name, _example_unit(model, name), "quantity"))
         elif name in quantities:
             raise InputError(where, f"no unit for {name!r}, which model {model.id!r} needs as a quantity: write "
                              f"'{name} [unit]' in the header (e.g. [{_example_unit(model, name)}]) or pass "
@@ -385,7 +388,7 @@ def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
     """A Dataset from a pandas DataFrame, validated as a CSV is: column names may carry their
     unit (``"normal_force [mN]"``), ``columns`` maps a header to a skinfit name (``{"Normal force
     (mN)": "normal_force"}``, the ``(mN)`` then read as its unit), ``units`` gives a unit (header
-    or skinfit name -> unit); values converted to SI."""
+    or skinfit name -> unit); values converted to SI (a function model's unitless columns: its SI)."""
     if not isinstance(frame, pd.DataFrame):
         raise frame_type_error(frame, "DataFrame")
     model = _as_model(model)
@@ -397,7 +400,8 @@ def from_frame(frame: pd.DataFrame, *, units: Mapping[str, str] | None = None,
         raise InputError(where, "column name appears twice", field=f"column {dup!r}")
     if len(frame) == 0:
         raise InputError(where, "no data rows")
-    cols = _columns_from_header(headers, where, model, units, _check_columns(columns, headers, where))
+    cols = _columns_from_header(headers, where, model, units, _check_columns(columns, headers, where),
+                                si=getattr(model, "user_function", False))
     table = {}
     for h, (_, col) in zip(headers, frame.items()):
         if pd.api.types.is_numeric_dtype(col.dtype) and not pd.api.types.is_bool_dtype(col.dtype):

@@ -21,7 +21,7 @@ import numpy as np
 from skinfit.errors import ForwardError
 from skinfit.io.arguments import shown
 
-__all__ = ["check_forward", "check_quantiles", "validated", "forward_error", "CHECK_DRAWS"]
+__all__ = ["check_forward", "check_quantiles", "validated", "forward_error", "undefined_hint", "CHECK_DRAWS"]
 
 #: Prior draws the forward function is checked on (then each again alone: CHECK_DRAWS + 1 calls).
 CHECK_DRAWS = 3
@@ -36,13 +36,24 @@ def check_quantiles(d, k=CHECK_DRAWS):
 
 
 def forward_error(model, what):
-    """ForwardError naming the card, its ``forward`` key and the function."""
-    return ForwardError(model.path or f"model {model.id}", f"{model.forward_ref}: {what}", field="forward")
+    """ForwardError naming the card, its ``forward`` (or ``function``) key and the function."""
+    field = "function" if getattr(model, "user_function", False) else "forward"
+    return ForwardError(model.path or f"model {model.id}", f"{model.forward_ref}: {what}", field=field)
+
+
+def undefined_hint(model):
+    """How to mend a NaN or inf a forward function returns where it says the model is valid."""
+    if getattr(model, "user_function", False):  # f(p, x) has no ok: the priors must avoid where it is undefined
+        return "narrow the priors to where the model is defined, or fix the function"
+    return "return ok False where the model is undefined, or fix the function"
 
 
 def _call(model, params, x, constants, when):
+    forward = model.forward  # not finding the function (InputError) is said as it is, not as the function's error
     try:
-        return model.forward(params, x, constants)
+        return forward(params, x, constants)
+    except ForwardError:  # said by the function's adapter (skinfit.io.user_functions), in one line already
+        raise
     except Exception as exc:  # any exception of a plug-in's code is its bug, named here in one line
         raise forward_error(model, f"raised {type(exc).__name__}: {str(exc)[:200]} ({when})") from exc
 
@@ -105,8 +116,8 @@ def check_forward(model, params, x, constants, observables, *, rows, points):
         if bad.any():
             i, j = np.argwhere(bad)[0]
             raise forward_error(model, f"returned {y[o][i, j]} for {o!r} at data row {rows[j]} with parameters "
-                                       f"{_point(points[i])}, a point it marks valid (ok True): return ok False where "
-                                       f"the model is undefined, or fix the function")
+                                       f"{_point(points[i])}, a point it marks valid (ok True): "
+                                       f"{undefined_hint(model)}")
     for i in range(k):
         alone = {p: v[i:i + 1] for p, v in params.items()}
         when = f"called on prior draw {i + 1} alone"

@@ -8,9 +8,9 @@ card are SI (:func:`skinfit.io.units.check_model_unit`).
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
-import re
 import tomllib
 import warnings
 from collections.abc import Mapping
@@ -26,16 +26,19 @@ if TYPE_CHECKING:  # pandas in annotations only: ``skinfit models`` does without
     import pandas as pd
 
 from skinfit.errors import InputError, InputTypeError, SupportWarning
-from skinfit.io.arguments import check_mapping, shown
-from skinfit.io.forward_check import forward_error, validated
+from skinfit.io.arguments import check_id, check_mapping, check_path, shown
+from skinfit.io.forward_check import forward_error, undefined_hint, validated
 from skinfit.io.paths import display
-from skinfit.io.references import check_source
-from skinfit.io.registry import resolve
+from skinfit.io.references import check_file_source
+from skinfit.io.registry import lookup, register, resolve
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 from skinfit.io.units import check_model_unit
+from skinfit.io.user_functions import adapt, check_source_hash, function_card, import_function
+from skinfit.io.user_priors import as_prior_set
 
 __all__ = ["Model", "Quantity", "load_model", "list_models", "parse_model_text", "resolve_forward", "check_id",
-           "check_constant", "resolve_noise", "resolve_constants", "resolve_split", "NOISE_MODELS"]
+           "check_constant", "resolve_noise", "resolve_constants", "resolve_split", "NOISE_MODELS", "user_forward",
+           "function_model", "write_card"]
 
 NOISE_MODELS = ("normal", "student_t", "lognormal")
 
@@ -56,17 +59,6 @@ def resolve_forward(ref, where="forward", role="forward"):
     """The function a card names for ``role`` (forward, shear, shift, derived), looked up in
     :mod:`skinfit.io.registry`; InputError naming ``where`` if it is not registered for that role."""
     return resolve(role, ref, where)
-
-
-_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,127}")
-
-
-def check_id(value, where, field="id"):
-    """An id is a name (it becomes a folder or file name): letters, digits, ``_ . + -``, no path."""
-    if not isinstance(value, str) or not _ID.fullmatch(value) or ".." in value:
-        raise InputError(where, f"expected a name of letters, digits, '_', '.', '+', '-' (no '/', '..' or "
-                         f"spaces; it names files and folders) (got {value!r})", field=field)
-    return value
 
 
 @dataclass(frozen=True)
@@ -95,10 +87,50 @@ class Model:
     sha256: str = ""
     card_text: str = ""
     file: str = ""  # the absolute path of the card read ("" when not read from a file)
+    user_function: bool = False  # the card names a ``function = "module:qualname"`` f(p, x), not a ``forward``
+    function_sha256: str = ""  # sha256 of that function's source ("" when Python had none)
+    saved: bool = False  # a card saved in a fit: its function may be imported by module and name
+    function: object = field(default=None, compare=False, repr=False)  # Model.from_function's, adapted
 
     @property
     def forward(self):
-        return resolve("forward", self.forward_ref, self.path)
+        """The forward function ``(p, x, c) -> (y, ok)`` (:mod:`skinfit.io.forward_check`)."""
+        if not self.user_function:
+            return resolve("forward", self.forward_ref, self.path)
+        return self.function if self.function is not None else user_forward(self)
+
+    @classmethod
+    def from_function(cls, func, *, observable, covariates, parameters, id=None, title=None, source=None) -> Model:
+        """A model whose forward model is the Python function ``func(p, x)``.
+
+        ``p`` maps each parameter to a (k, 1) array of k parameter draws, ``x`` each covariate
+        to an (n,) array, all SI; ``func`` returns the (k, n) array of the observable, or a dict
+        observable -> (k, n) array.  It is checked on a few prior draws before a fit (shape,
+        finiteness, vectorisation over draws).
+
+        The model is recorded by the function's ``module:qualname`` and the sha256 of its source
+        (none for a function Python has no source for); a saved fit needs the function only to
+        evaluate the model again.  The function is registered (role ``function``) in this
+        process, so the card :meth:`to_card` writes loads here as well (docs/own-model.md).
+
+        Parameters
+        ----------
+        observable : (name, unit) or (name, unit, noise), a sequence of them, or a mapping name -> unit
+            The observable(s), SI unit; noise ``normal`` (default), ``student_t`` or ``lognormal``.
+        covariates, parameters : mapping name -> unit (or name -> (unit, description))
+            SI units; a power may name a parameter (``"N^(1-n)"``).
+        id, title, source : str, optional
+            Default: the function's name; a title naming it; ``source`` free text (your paper).
+        """
+        return function_model(cls, func, observable, covariates, parameters, id, title, source)
+
+    def to_card(self, folder: str | os.PathLike, priors=None, *, overwrite: bool = False) -> dict:
+        """Write this model's card to ``folder/models/<id>.toml`` and, given ``priors`` (a
+        PriorSet or a mapping parameter -> scipy.stats distribution), its prior file to
+        ``folder/priors/<id>.toml``: the files a plug-in package ships (docs/own-model.md).
+        Returns {"model": path, "priors": path}; InputError for a file already there unless
+        ``overwrite``."""
+        return write_card(self, folder, priors, overwrite)
 
     @property
     def parameter_names(self):
@@ -179,7 +211,7 @@ class Model:
             if (valid & ~np.isfinite(arr)).any():
                 i, j = np.argwhere(valid & ~np.isfinite(arr))[0]
                 raise forward_error(self, f"returned {arr[i, j]} for {name!r} at row {j + 1} of draw {i + 1}, a point "
-                                          "it marks valid (ok True): return ok False where the model is undefined")
+                                          f"it marks valid (ok True): {undefined_hint(self)}")
             arr[~valid] = np.nan  # (a new array: validated() copies)
             out[name] = arr[0] if scalar else arr
         valid = valid[0] if scalar else valid
@@ -251,10 +283,10 @@ def load_model(name: str | os.PathLike) -> Model:
 def _parse_model(path, digest):
     _, text = read_toml(path)
     model = replace(parse_model_text(text, display(path), digest), file=str(Path(path).resolve()))
-    check_source(model.source, model.path, "source")  # keys into references.toml
+    check_file_source(model.source, path, model.path, "source")  # keys into references.toml (shipped cards)
     for cname, source in model.constant_sources.items():
         if source:
-            check_source(source, model.path, f"constants.{cname}.source")
+            check_file_source(source, path, model.path, f"constants.{cname}.source")
     return model
 
 
@@ -325,11 +357,12 @@ def resolve_split(model, split, dataset, where):
     return out
 
 
-def parse_model_text(text, where, digest):
+def parse_model_text(text, where, digest, *, saved=False):
     """The :class:`Model` of a model card's TOML ``text`` (as read from a file, or as saved in a
-    fit's root attributes), validated; ``where`` names it in errors and becomes its ``path``,
-    ``digest`` is the sha256 of its file. Its ``source`` keys are not resolved here
-    (:func:`load_model` checks them against the references files)."""
+    fit's root attributes: ``saved``), validated; ``where`` names it in errors and becomes its
+    ``path``, ``digest`` is the sha256 of its file. Its ``source`` keys are not resolved here
+    (:func:`load_model` checks them against the references files).  The function a ``saved``
+    card names as ``function`` is looked for only when the model is evaluated."""
     doc = tomllib.loads(text)
     constants, sources = {}, {}
     for cname, spec in require(doc, "constants", dict, where, default={}).items():
@@ -351,7 +384,10 @@ def parse_model_text(text, where, digest):
         id=check_id(require(doc, "id", str, where), where),
         title=require(doc, "title", str, where),
         source=require(doc, "source", str, where),
-        forward_ref=require(doc, "forward", str, where),
+        forward_ref=_forward_key(doc, where),
+        user_function="function" in doc,
+        function_sha256=require(doc, "function_sha256", str, where, default=""),
+        saved=saved,
         observables=_quantities(doc, "observables", where, observable=True),
         covariates=_quantities(doc, "covariates", where),
         parameters=_quantities(doc, "parameters", where),
@@ -374,7 +410,10 @@ def parse_model_text(text, where, digest):
     )
     if not model.observables:
         raise InputError(where, "a model needs at least one observable", field="observables")
-    resolve("forward", model.forward_ref, where)
+    if not model.user_function:
+        resolve("forward", model.forward_ref, where)
+    elif not saved:  # a card file: its function must be registered (a saved fit's is looked for when needed)
+        user_forward(model)
     for pname in model.split:
         if pname not in model.parameter_names:
             raise InputError(where, f"split names unknown parameter {pname!r}", field=f"split.{pname}")
@@ -395,6 +434,61 @@ def parse_model_text(text, where, digest):
                 raise InputError(where, f"{sorted(a & b)[0]!r} has two sampling coordinates: a parameter may "
                                  f"be in at most one of shear, shift, product and linear", field="sampling")
     return model
+
+
+def _forward_key(doc, where):
+    """The card's ``forward`` (a function of the card contract) or ``function`` (a user's
+    ``f(p, x)``: :mod:`skinfit.io.user_functions`): exactly one of them."""
+    if ("forward" in doc) == ("function" in doc):
+        raise InputError(where, "expected either forward = \"module:function\" (f(p, x, c) -> (y, ok)) or "
+                         "function = \"module:function\" (f(p, x) -> array), not " + ("both" if "forward" in doc
+                                                                                     else "neither"), field="forward")
+    return require(doc, "forward" if "forward" in doc else "function", str, where)
+
+
+_USER_FORWARDS = {}
+
+
+def user_forward(model):
+    """The forward function of a card that names a user's ``function``: found in the registry
+    (role ``function``), or for a card saved in a fit imported by module and name; its source
+    checked against the card's ``function_sha256`` (InputError in one line otherwise)."""
+    key = (model.forward_ref, model.function_sha256, model.observable_names, model.saved, model.path)
+    if key not in _USER_FORWARDS:
+        if model.saved and lookup("function", model.forward_ref) is None:
+            func = import_function(model.forward_ref, model.function_sha256, model.path)
+        else:
+            func = check_source_hash(resolve("function", model.forward_ref, model.path), model.forward_ref,
+                                     model.function_sha256, model.path, model.saved)
+        _USER_FORWARDS[key] = adapt(func, model.observable_names, model.forward_ref, model.path)
+    return _USER_FORWARDS[key]
+
+
+def function_model(cls, func, observable, covariates, parameters, id=None, title=None, source=None):
+    """:meth:`Model.from_function` (which documents it): the card of ``func`` written, parsed and
+    checked as a card file's is, with ``func`` registered for role ``function`` in this process."""
+    ref, text = function_card(func, observable, covariates, parameters, id, title, source)
+    if lookup("function", ref) is None or resolve("function", ref, "Model.from_function") is not func:
+        register("function", ref, func, replace=True)
+    name = getattr(func, "__name__", "?")
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    model = parse_model_text(text, f"model from function {name}", digest)
+    return replace(model, function=adapt(func, model.observable_names, ref, model.path))
+
+
+def write_card(model, folder, priors=None, overwrite=False):
+    """:meth:`Model.to_card` (which documents it)."""
+    folder = Path(check_path(folder, "to_card", "folder", "a folder path"))
+    files = {"model": (folder / "models" / f"{model.id}.toml", model.card_text)}
+    if priors is not None:
+        files["priors"] = (folder / "priors" / f"{model.id}.toml", as_prior_set(priors, model, "to_card").text)
+    for kind, (path, _) in files.items():
+        if path.exists() and not overwrite:
+            raise InputError("to_card", f"{display(path)} exists (pass overwrite=True to replace it)", field=kind)
+    for path, text in files.values():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    return {kind: path for kind, (path, _) in files.items()}
 
 
 def _check_products(model, where):

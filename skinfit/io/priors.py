@@ -17,13 +17,13 @@ from types import MappingProxyType
 import numpy as np
 
 from skinfit.errors import InputError
-from skinfit.io.models import check_id
+from skinfit.io.arguments import check_id
 from skinfit.io.paths import display
-from skinfit.io.references import check_source
+from skinfit.io.references import check_file_source
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
 
 __all__ = ["Prior", "PriorSet", "load_priors", "list_priors", "check_priors_for", "check_physical", "prior_groups",
-           "DISTRIBUTIONS", "LOG_DENSITIES"]
+           "DISTRIBUTIONS", "LOG_DENSITIES", "SCIPY_NAMES"]
 
 
 def _stats():
@@ -56,6 +56,17 @@ LOG_DENSITIES = {
     "halfnormal": lambda x, a, lo, hi: -0.5 * (x / a["scale"]) ** 2,
     "gamma": lambda x, a, lo, hi: (a["shape"] - 1) * np.log(x) - x / a["scale"],
     "beta": lambda x, a, lo, hi: (a["a"] - 1) * np.log(x) + (a["b"] - 1) * np.log1p(-x),
+}
+#: How scipy.stats writes each family, for messages: a prior file takes the names above (and
+#: Python code takes scipy's frozen distributions themselves: skinfit.io.user_priors).
+SCIPY_NAMES = {
+    "uniform": "scipy's uniform(loc, scale) is bounds = [loc, loc + scale]",
+    "loguniform": "scipy's loguniform(a, b) is bounds = [a, b]",
+    "normal": "scipy's norm(loc, scale) is normal loc, scale",
+    "lognormal": "scipy's lognorm(s, scale) is lognormal median = scale, sigma = s",
+    "halfnormal": "scipy's halfnorm(scale) is halfnormal scale, bounds from 0",
+    "gamma": "scipy's gamma(a, scale) is gamma shape = a, scale = scale",
+    "beta": "scipy's beta(a, b) is beta a, b on [0, 1]",
 }
 _POSITIVE_ARGS = {"scale", "sigma", "median", "shape", "a", "b"}
 
@@ -191,6 +202,11 @@ def parse_prior(name, spec, where, check_mass=True):
         raise InputError(where, f"unknown distribution {dist!r} (expected one of "
                          f"{', '.join(DISTRIBUTIONS)})", field=prefix + "dist")
     needed, _ = DISTRIBUTIONS[dist]
+    extra = set(spec) - set(needed) - {"dist", "bounds", "source"}
+    if extra:
+        hint = f"; {SCIPY_NAMES[dist]}" if extra & {"s", "loc", "scale", "a", "b"} - set(needed) else ""
+        raise InputError(where, f"unexpected keys {sorted(extra)} for a {dist} prior (expected "
+                         f"{', '.join(needed) or 'no arguments'}, bounds, source{hint})", field=name)
     args = {}
     for arg in needed:
         value = require(spec, arg, float, where, field_prefix=prefix)
@@ -199,10 +215,6 @@ def parse_prior(name, spec, where, check_mass=True):
         if arg in _POSITIVE_ARGS and value <= 0:
             raise InputError(where, f"must be > 0 (got {value:g})", field=prefix + arg)
         args[arg] = value
-    extra = set(spec) - set(needed) - {"dist", "bounds", "source"}
-    if extra:
-        raise InputError(where, f"unexpected keys {sorted(extra)} for a {dist} prior (expected "
-                         f"{', '.join(needed) or 'no arguments'}, bounds, source)", field=name)
     bounds = require(spec, "bounds", list, where, field_prefix=prefix)
     if len(bounds) != 2 or not all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in bounds):
         raise InputError(where, f"expected [lower, upper] numbers (got {bounds!r})", field=prefix + "bounds")
@@ -289,7 +301,7 @@ def load_priors(name: str | os.PathLike, *, check_mass: bool = True) -> PriorSet
         if key in ("schema_version", "model", "id"):
             continue
         priors[key] = parse_prior(key, spec, where, check_mass)
-        check_source(priors[key].source, where, f"{key}.source")  # a key into references.toml
+        check_file_source(priors[key].source, path, where, f"{key}.source")  # a key of references.toml if shipped
     if not priors:
         raise InputError(where, "no priors defined")
     return PriorSet(id=doc.get("id", path.stem), model=model, priors=MappingProxyType(priors),

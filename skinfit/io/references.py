@@ -1,9 +1,10 @@
 """The works the model cards and prior files cite (``skinfit/references.toml``, plus a
 ``references.toml`` in any folder of the search path, for a user's own cards: skinfit.io.paths).
 
-A card's ``source`` is one or more citations joined by ``"; "``, each ``KEY`` or
+A shipped card's ``source`` is one or more citations joined by ``"; "``, each ``KEY`` or
 ``KEY, where`` (``"fujii_wavy, eq. 13"``); :func:`check_source` refuses an unknown key at load
-time and :func:`cite` renders a source for readers (``Fujii, Okamoto & Yamada, eq. 13``).
+time (a user's own file may give free text: :func:`check_file_source`) and :func:`cite` renders
+a source for readers (``Fujii, Okamoto & Yamada, eq. 13``).
 """
 
 import re
@@ -14,9 +15,9 @@ from pathlib import Path
 from types import MappingProxyType
 
 from skinfit.errors import InputError
-from skinfit.io.paths import search_path
+from skinfit.io.paths import search_path, shipped_root
 
-__all__ = ["references", "full", "cite_long", "parse_source", "check_source", "cite"]
+__all__ = ["references", "full", "cite_long", "parse_source", "check_source", "check_file_source", "cite"]
 
 _KEY = re.compile(r"^([a-z][a-z0-9_]*)(?:\s*[,:]\s*(.*))?$", re.S)
 _FIELDS = {"title", "authors", "venue", "year", "doi", "note", "short"}
@@ -77,6 +78,18 @@ def check_source(source, where, field):
             raise InputError(where, f"expected a reference key (skinfit/references.toml, or a "
                              f"references.toml on the search path) then ', where' (got {cited!r}; known: "
                              f"{', '.join(known)})", field=field)
+    return source
+
+
+def check_file_source(source, file, where, field):
+    """:func:`check_source` for a shipped card or prior file (``file`` in the shipped ``models/``
+    or ``priors/``); a user's own file may give free text instead, recorded and shown as given."""
+    shipped = shipped_root()
+    folder = Path(file).resolve().parent
+    if shipped is not None and folder in ((shipped / "models").resolve(), (shipped / "priors").resolve()):
+        return check_source(source, where, field)
+    if not isinstance(source, str):
+        raise InputError(where, f"expected a text (got {type(source).__name__})", field=field)
     return source
 
 

@@ -1,7 +1,8 @@
 """The code a card may name: role -> registered name -> function with the role's signature.
 
-A model card names functions in four roles: its ``forward`` model, ``[sampling.shear]``
-offsets, ``[sampling.shift]`` constants and a ``[derived]`` function.  Only functions
+A model card names functions in five roles: its ``forward`` model (or, for a model written as
+a plain function ``f(p, x)``, its ``function``: :mod:`skinfit.io.user_functions`),
+``[sampling.shear]`` offsets, ``[sampling.shift]`` constants and a ``[derived]`` function.  Only functions
 registered for that role can be named, as ``module:function`` or by their short name, and
 the registry checks the role's call signature when a card is loaded: a card naming a cache
 helper, an integer constant or another role's function is refused then, not at fit time.
@@ -10,8 +11,8 @@ Shipped physics is registered in :data:`BUILTIN` (as import strings: the physics
 import nothing from skinfit, and are imported only when a card names them).  Installed
 packages add functions through the ``skinfit.models`` entry-point group (read on first
 need): the entry point loads either a forward function (registered under the entry
-point's name) or a mapping ``{"forward": {name: f}, "shear": {...}, "shift": {...},
-"derived": {...}, "folder": path}`` whose ``folder`` holds ``models/`` and ``priors/``
+point's name) or a mapping ``{"forward": {name: f}, "function": {...}, "shear": {...},
+"shift": {...}, "derived": {...}, "folder": path}`` whose ``folder`` holds ``models/`` and ``priors/``
 cards that :mod:`skinfit.io.toml` then finds by id.
 """
 
@@ -23,8 +24,8 @@ from pathlib import Path
 
 from skinfit.errors import InputError
 
-__all__ = ["ROLES", "BUILTIN", "ENTRY_POINT_GROUP", "resolve", "registered", "register", "unregister",
-           "plugin_folders"]
+__all__ = ["ROLES", "BUILTIN", "ENTRY_POINT_GROUP", "resolve", "lookup", "registered", "register", "unregister",
+           "plugin_folders", "plugin_problems"]
 
 ENTRY_POINT_GROUP = "skinfit.models"
 
@@ -34,9 +35,10 @@ ROLES = {
     "shear": ("p", "c"),          # -> log-offset, broadcastable to (k,)
     "shift": ("c",),              # -> float > 0, same unit as the parameter
     "derived": ("p", "x", "c"),   # -> dict name -> (k, n) array
+    "function": ("p", "x"),       # a user's forward model: -> (k, n) array, or dict name -> (k, n) array
 }
 _CARD_KEY = {"forward": "forward", "shear": "sampling.shear", "shift": "sampling.shift",
-             "derived": "derived.function"}
+             "derived": "derived.function", "function": "function"}
 
 _PHYS = "skinfit.physics."
 #: role -> "module:function" of every shipped function a card may name.
@@ -53,6 +55,7 @@ BUILTIN = {
     "shift": (_PHYS + "electroadhesion:air_gap_shift",),
     "derived": tuple(_PHYS + r for r in (
         "contact_area:derived", "contact_area:derived_hertz", "contact_area:derived_no_levitation")),
+    "function": (),
 }
 
 
@@ -82,11 +85,14 @@ def _builtin_table():
 
 
 def _load_plugins():
-    """Read the ``skinfit.models`` entry points once: (role -> {key: entry}, card folders)."""
+    """Read the ``skinfit.models`` entry points once: (role -> {key: entry}, card folders,
+    problems).  An entry point that fails to import, loads something else than a function or a
+    mapping of roles, or registers a name already taken is left out and its problem recorded
+    (:func:`plugin_problems`): one broken plug-in does not take the others or the shipped models down."""
     global _PLUGINS
     if _PLUGINS is not None:
         return _PLUGINS
-    table, folders = {role: {} for role in ROLES}, []
+    table, folders, problems = {role: {} for role in ROLES}, [], []
     builtin = _builtin_table()
     for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
         dist = getattr(ep.dist, "name", "?")
@@ -94,26 +100,40 @@ def _load_plugins():
         try:
             obj = ep.load()
         except Exception as exc:  # a broken plug-in must not take the shipped models down with it
-            raise InputError(f"installed package {dist}", f"its {ENTRY_POINT_GROUP} entry point {ep.name!r} "
-                             f"({ep.value}) fails to import: {type(exc).__name__}") from None
+            problems.append(f"installed package {dist}: its {ENTRY_POINT_GROUP} entry point {ep.name!r} "
+                            f"({ep.value}) fails to import: {type(exc).__name__}: {str(exc)[:120]}")
+            continue
         spec = {"forward": {ep.name: obj}} if callable(obj) else obj
         if not isinstance(spec, dict) or set(spec) - set(ROLES) - {"folder"}:
-            raise InputError(f"installed package {dist}", f"{origin} must load a forward function or a "
-                             f"mapping with keys {', '.join(ROLES)}, folder")
+            problems.append(f"installed package {dist}: {origin} must load a forward function or a mapping with "
+                            f"keys {', '.join(ROLES)}, folder")
+            continue
+        entries = {}
+        try:
+            for role in ROLES:
+                for name, func in dict(spec.get(role, {})).items():
+                    ref = f"{getattr(func, '__module__', '?')}:{getattr(func, '__name__', '?')}"
+                    entry = _Entry(ref, origin, func)
+                    for key in (name, ref):
+                        if key in builtin[role] or key in table[role] or (role, key) in entries:
+                            raise InputError(f"installed package {dist}", f"{origin} registers {role} "
+                                             f"{key!r}, which is already registered")
+                        entries[role, key] = entry
+                    _check_signature(role, func, f"installed package {dist}", f"{ENTRY_POINT_GROUP}.{ep.name}")
+        except InputError as exc:
+            problems.append(str(exc))
+            continue
+        for (role, key), entry in entries.items():
+            table[role][key] = entry
         if spec.get("folder") is not None:
             folders.append(Path(spec["folder"]))
-        for role in ROLES:
-            for name, func in dict(spec.get(role, {})).items():
-                ref = f"{getattr(func, '__module__', '?')}:{getattr(func, '__name__', '?')}"
-                entry = _Entry(ref, origin, func)
-                for key in (name, ref):
-                    if key in builtin[role] or key in table[role]:
-                        raise InputError(f"installed package {dist}", f"{origin} registers {role} "
-                                         f"{key!r}, which is already registered")
-                    table[role][key] = entry
-                _check_signature(role, func, f"installed package {dist}", f"{ENTRY_POINT_GROUP}.{ep.name}")
-    _PLUGINS = (table, tuple(folders))
+    _PLUGINS = (table, tuple(folders), tuple(problems))
     return _PLUGINS
+
+
+def plugin_problems():
+    """One line for each ``skinfit.models`` entry point left out because it is broken."""
+    return _load_plugins()[2]
 
 
 def plugin_folders():
@@ -133,6 +153,13 @@ def _lookup(role, ref):
     if entry is None:
         entry = _load_plugins()[0][role].get(ref)
     return entry
+
+
+def lookup(role, ref):
+    """Whether ``ref`` is registered for ``role``: where it comes from (``"skinfit"``, an entry
+    point, ``"register()"``), or None."""
+    entry = _lookup(role, ref)
+    return None if entry is None else entry.origin
 
 
 def _check_signature(role, func, where, field):
@@ -165,9 +192,12 @@ def resolve(role, ref, where, field=None):
         if other:
             raise InputError(where, f"{ref!r} is registered as a {other[0]} function, not a {role} function "
                              f"(registered {role} functions: {', '.join(registered(role))})", field=field)
-        raise InputError(where, f"{ref!r} is not a registered {role} function (registered: "
-                         f"{', '.join(registered(role))}; a package adds its own through the "
-                         f"{ENTRY_POINT_GROUP!r} entry point)", field=field)
+        broken = f"; left out: {'; '.join(plugin_problems())}" if plugin_problems() else ""
+        what = "model function f(p, x)" if role == "function" else f"{role} function"
+        known = ", ".join(registered(role)) or "none"
+        here = " or skinfit.Model.from_function in this process" if role == "function" else ""
+        raise InputError(where, f"{ref!r} is not a registered {what} (registered: {known}; a package adds its own "
+                         f"through the {ENTRY_POINT_GROUP!r} entry point{here}{broken})", field=field)
     func = entry.function
     if func is None:
         module, _, name = entry.ref.partition(":")
@@ -177,15 +207,19 @@ def resolve(role, ref, where, field=None):
     return func
 
 
-def register(role, name, func):
+def register(role, name, func, *, replace=False):
     """Register ``func`` for ``role`` under ``name`` (a short name or ``module:function``) in
-    this process: for interactive work and tests; an installed package uses the entry point."""
+    this process: for interactive work and tests; an installed package uses the entry point.
+    ``replace``: a function registered here before under ``name`` is replaced (a notebook cell
+    run again), never a shipped or plug-in one."""
     if role not in ROLES:
         raise InputError("register", f"unknown role {role!r} (expected one of {', '.join(ROLES)})")
     _check_signature(role, func, "register", name)
-    if _lookup(role, name) is not None:
-        raise InputError("register", f"{role} {name!r} is already registered")
+    found = _lookup(role, name)
+    if found is not None and not (replace and found.origin == "register()"):
+        raise InputError("register", f"{role} {name!r} is already registered ({found.origin})")
     _load_plugins()[0][role][name] = _Entry(name, "register()", func)
+    _RESOLVED.pop((role, name), None)
 
 
 def unregister(role, name):

@@ -405,7 +405,7 @@ def rebuild_posterior(tree):
     rebuilds it without fitting."""
     attrs = tree.attrs
     model = parse_model_text(attrs["model_card"], f"model card saved in fit ({attrs['model_id']})",
-                              attrs["model_sha256"])
+                             attrs["model_sha256"], saved=True)
     priors = PriorSet(id=attrs["priors_id"], model=attrs["model_id"],
                       priors=MappingProxyType(priors_from_attrs(attrs)), path="saved priors",
                       sha256=attrs["priors_sha256"], text=attrs["priors_text"])

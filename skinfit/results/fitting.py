@@ -29,7 +29,7 @@ __all__ = ["fit"]
 
 
 def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
-        priors: str | os.PathLike | PriorSet | None = None, *, units: Mapping[str, str] | None = None,
+        priors: str | os.PathLike | PriorSet | Mapping | None = None, *, units: Mapping[str, str] | None = None,
         columns: Mapping[str, str] | None = None, rng: int | np.random.Generator | None = None,
         split: Mapping[str, Sequence[str]] | None = None,
         noise: str | Mapping[str, str] | None = None, constants: Mapping[str, float] | None = None,
@@ -52,8 +52,10 @@ def fit(model: str | Model, dataset: str | os.PathLike | Dataset | pd.DataFrame,
         For a DataFrame with a lab's headers: ``{"Normal force (mN)": "normal_force"}`` (a
         header's ``(unit)`` or ``[unit]`` is read as its unit).  A file is mapped once, into a
         dataset card: ``skinfit dataset init`` (docs: "Your lab's files").
-    priors : PriorSet or str, optional
-        Default: ``priors/<model id>.toml``.
+    priors : PriorSet, str or mapping, optional
+        Default: ``priors/<model id>.toml``.  A mapping parameter -> frozen scipy.stats
+        distribution (its support the bounds; :func:`skinfit.truncate` for narrower ones) or
+        prior-file table, with ``sigma`` (and ``nu`` for Student-t noise) for the noise.
     rng : int, None or numpy.random.Generator
         The one source of randomness (SPEC 7); the same seed gives identical samples.  The fit
         draws from it in a fixed order (MAP search, importance start, walkers, sampling, prior

@@ -114,6 +114,8 @@ def build_parser():
     s = sub.add_parser("models", help="list the model cards (models/*.toml) with units and sources")
     s.add_argument("--json", action="store_true", help="machine-readable output")
     s.add_argument("--verbose", "-v", action="store_true", help="show the search path and where each card is from")
+    s.add_argument("--strict", action="store_true", help="exit 1 when a card or plug-in cannot be read "
+                                                         "(default: list the others, warn, exit 0)")
     s.set_defaults(func=_command("skinfit.apps.cli.models"))
     s = sub.add_parser("priors", help="show a model's priors with their literature sources "
                                       "(no MODEL: list prior files)")

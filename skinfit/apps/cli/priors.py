@@ -8,6 +8,7 @@ from skinfit.errors import InputError
 from skinfit.io.models import load_model
 from skinfit.io.priors import load_priors
 from skinfit.io.references import cite
+from skinfit.io.user_priors import as_written
 
 __all__ = ["run"]
 
@@ -32,9 +33,12 @@ def run(args):
                   else "(noise, observable's unit)"
                   for n in priors.priors}
     rows = [{"parameter": n, "unit": units.get(n, noise_unit[n]), "prior": p.describe(),
+             "file": as_written(p)[0], "python": as_written(p)[1],
              "source": p.source, "cited": cite(p.source)} for n, p in priors.priors.items()]
     if args.json:
         return print(json.dumps(rows, indent=2))
-    print(f"priors for {priors.model} ({priors.path}), SI units, each truncated to its bounds:\n")
+    print(f"priors for {priors.model} ({priors.path}), SI units, each truncated to its bounds, as a prior file "
+          "writes them and as Python (import scipy.stats as st) gives them:\n")
     for r in rows:
-        print(f"{r['parameter']} [{r['unit']}]: {r['prior']}\n    source: {r['cited']}")
+        print(f"{r['parameter']} [{r['unit']}]: {r['file']}"
+              f"\n    in Python: {r['python']}\n    source: {r['cited']}")
