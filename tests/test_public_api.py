@@ -30,8 +30,8 @@ FROZEN = {
     'evidence': "(fit: 'Fit', method: 'str' = 'bridge', *, rng: 'int | np.random.Generator | None' = None, n_repeats: 'int' = 1, refresh: 'bool' = False, **options) -> 'LogEvidence'",
     'fit': "(model: 'str | Model', dataset: 'str | os.PathLike | Dataset | pd.DataFrame', priors: 'str | os.PathLike | PriorSet | None' = None, *, units: 'Mapping[str, str] | None' = None, rng: 'int | np.random.Generator | None' = None, split: 'Mapping[str, Sequence[str]] | None' = None, noise: 'str | Mapping[str, str] | None' = None, constants: 'Mapping[str, float] | None' = None, nwalkers: 'int | None' = None, ess_target: 'float' = 400, max_steps: 'int' = 20000, progress: 'bool' = False, strict: 'bool' = False, n_global: 'int' = 2000, n_local: 'int' = 4, n_prior_draws: 'int' = 2000, checkpoint: 'str | os.PathLike | None' = None, resume: 'bool' = False, checkpoint_every: 'float' = 30.0, complete: 'bool' = True) -> 'Fit'",
     'fit_by': '(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, noise=None, progress=False, ess_target=400, max_steps=20000, overwrite=False, writes_card=False, **fit_options)',
-    'fit_contrasts': "(fits: 'Mapping[str, Fit]', parameter: 'str', rng: 'int | np.random.Generator | None' = None, prob: 'float' = 0.95) -> 'pd.DataFrame'",
-    'level_contrasts': "(fit: 'Fit', parameter: 'str', prob: 'float' = 0.95) -> 'pd.DataFrame'",
+    'fit_contrasts': "(fits: 'Mapping[str, Fit]', parameter: 'str', rng: 'int | np.random.Generator | None' = None, prob: 'float' = 0.94, rope=None) -> 'pd.DataFrame'",
+    'level_contrasts': "(fit: 'Fit', parameter: 'str', prob: 'float' = 0.94, rope=None) -> 'pd.DataFrame'",
     'list_datasets': "() -> 'list[str]'",
     'list_models': "() -> 'list[str]'",
     'list_priors': "() -> 'list[str]'",
@@ -42,7 +42,7 @@ FROZEN = {
     'load_population': '(path)',
     'load_priors': "(name: 'str | os.PathLike', *, check_mass: 'bool' = True) -> 'PriorSet'",
     'population': "(fits: 'Mapping[str, Fit] | Sequence[Fit] | str | os.PathLike', parameters: 'Sequence[str] | None' = None, *, family: 'str | Mapping[str, str] | None' = None, correlated: 'bool' = False, method: 'str' = 'gibbs', rng: 'int | np.random.Generator | None' = None, model: 'str | None' = None, chains: 'int' = 8, ess_target: 'float' = 400, rhat_max: 'float' = 1.01, max_sweeps: 'int' = 20000, burn: 'int' = 300, min_contraction: 'float' = 0.5, n_draws: 'int' = 1000, max_steps: 'int' = 20000, cache: 'str | os.PathLike | None' = None) -> 'PopulationResult'",
-    'population_tables': '(result, prob=0.95)',
+    'population_tables': '(result, prob=0.94)',
     'run_sbc': '(model, dataset=None, *, priors=None, fit_priors=None, n_sims=100, n_draws=99, seed=0, n_rows=None, split=None, ess_target=100, max_steps=4000, n_global=300, alpha=0.01, jobs=1, progress=None)',
 }
 

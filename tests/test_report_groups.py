@@ -115,7 +115,7 @@ def test_population_band_is_where_94_percent_of_subjects_lie():
     class Result:
         parameters, subjects = ["E"], ["S01"]
 
-        def summary(self):
+        def summary(self, prob=0.94):
             return pd.DataFrame([{"parameter": "E", "quantity": "mu", "estimate": np.log(2e4), "lower": 0.0,
                                   "upper": 0.0, "coordinate": "log"},
                                  {"parameter": "E", "quantity": "tau", "estimate": 0.5, "lower": 0.0,
@@ -137,14 +137,14 @@ def test_a_report_section_computes_the_population_summary_once():
     class Result:
         parameters, subjects, calls = ["E", "F", "G"], ["S01"], 0
 
-        def summary(self):
+        def summary(self, prob=0.94):
             Result.calls += 1
             return pd.DataFrame([{"parameter": p, "quantity": q, "estimate": v, "lower": 0.0, "upper": 0.0,
                                   "coordinate": "log"}
                                  for p, mu in zip(self.parameters, (1e3, 2e4, 3e5))
                                  for q, v in (("mu", np.log(mu)), ("tau", 0.5))])
 
-        def subject_summary(self):
+        def subject_summary(self, prob=0.94):
             return pd.DataFrame([{"parameter": p, "subject": "S01", "estimate": 1.0} for p in self.parameters])
 
     section = population_section(Result())

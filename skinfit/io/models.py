@@ -32,7 +32,7 @@ from skinfit.io.paths import display
 from skinfit.io.references import check_source
 from skinfit.io.registry import resolve
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
-from skinfit.io.units import check_model_unit
+from skinfit.io.units import check_model_unit, dimension, same_dimension
 
 __all__ = ["Model", "Quantity", "load_model", "list_models", "parse_model_text", "resolve_forward", "check_id",
            "check_constant", "resolve_noise", "resolve_constants", "resolve_split", "NOISE_MODELS"]
@@ -50,6 +50,7 @@ class Quantity:
     noise: str | None = None  # observables only
     optional: bool = False  # covariates only: NaN allowed by design
     physical: tuple = (-math.inf, math.inf)  # parameters only: the range the physics allows
+    display_unit: str = ""  # parameters only: the unit tables and figures show values in (kPa for a modulus)
 
 
 def resolve_forward(ref, where="forward", role="forward"):
@@ -223,7 +224,17 @@ def _quantities(doc, key, where, *, observable=False):
                 raise InputError(where, f"expected [lower, upper] numbers with lower < upper, inf allowed "
                                  f"(got {physical!r})", field=prefix + "physical")
             physical = (float(physical[0]), float(physical[1]))
-        out.append(Quantity(name, unit, desc, noise, optional, physical))
+        display = ""
+        if key == "parameters" and "display_unit" in item:
+            display = require(item, "display_unit", str, where, field_prefix=prefix)
+            try:
+                same = same_dimension(display, unit)
+            except ValueError as exc:
+                raise InputError(where, str(exc), field=prefix + "display_unit") from None
+            if not same:
+                raise InputError(where, f"expected a unit of the dimension of {unit!r} (got {display!r}, a "
+                                 f"{dimension(display)})", field=prefix + "display_unit")
+        out.append(Quantity(name, unit, desc, noise, optional, physical, display))
     names = [q.name for q in out]
     dup = {n for n in names if names.count(n) > 1}
     if dup:

@@ -47,7 +47,7 @@ def run(args):
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
         path = result.save(out / "fit.nc")  # still holding the lock: no other run sees the folder half written
-        summary = result.summary()
+        summary = result.summary(ci_prob=getattr(args, "ci", None))
         (out / "summary.csv").write_text(summary.to_csv())
         card = None
         if dataset is not None:  # a CSV without a card: its card and a copy beside the result

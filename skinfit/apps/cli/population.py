@@ -85,7 +85,7 @@ def run(args):
                 result = population(args.run, params, family=family, correlated=args.correlated,
                                     method=args.method, rng=args.seed, model=args.model,
                                     max_sweeps=args.max_sweeps, cache=out / ".cache" / "population.npz")
-            tables = population_tables(result)
+            tables = population_tables(result, **({} if getattr(args, "ci", None) is None else {"prob": args.ci}))
             for name, table in (("summary", "hyper"), ("subjects", "subjects"), ("effects", "effects")):
                 replace_atomic(out / f"population_{name}.csv", tables[table].to_csv(index=False).encode())
             path = result.save(out / "population.nc")
