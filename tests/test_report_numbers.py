@@ -289,3 +289,56 @@ def test_a_display_unit_of_another_dimension_is_refused(tmp_path):
     bad.write_text(card.replace('display_unit = "kPa"', 'display_unit = "kPaa"', 1))
     with pytest.raises(skinfit.InputError, match="display_unit"):
         skinfit.load_model(str(bad))
+
+
+def test_contrast_matrix_draws_each_pair_once_each_way():
+    """13 subjects whose log modulus rises by 0.1 each: cell (A, B) holds log(A / B) of the
+    medians (about 0.1 * (i - j)), antisymmetric, and a dot on each side of every pair whose
+    probability of direction exceeds 0.95."""
+    import itertools
+
+    import pandas as pd
+
+    from skinfit.analysis.contrasts import contrast
+    from skinfit.plots.contrast_matrix import plot_contrast_matrix
+
+    rng = np.random.default_rng(0)
+    subjects = {f"S{i:02d}": np.exp(rng.normal(np.log(2e4) + 0.1 * i, 0.1, 4000)) for i in range(13)}
+    table = pd.DataFrame([{"A": a, "B": b, "parameter": "E_star", **contrast(subjects[a], subjects[b])}
+                          for a, b in itertools.combinations(subjects, 2)])
+    fig = plot_contrast_matrix(table, "E_star")
+    ax = fig.axes[0]
+    values = ax.images[0].get_array()
+    np.testing.assert_allclose(values, -values.T)
+    i, j = np.triu_indices(13, 1)
+    np.testing.assert_allclose(values[i, j], 0.1 * (i - j), atol=0.02)
+    assert len(ax.lines[0].get_xdata()) == 2 * int((table["prob_direction"] > 0.95).sum())
+
+
+def test_a_cards_rope_is_read_and_checked(tmp_path):
+    """``rope = [low, high]`` on a parameter: the region of practical equivalence its contrasts
+    report P in; a reversed one is refused naming the field."""
+    card = (Path(skinfit.__file__).parents[1] / "models" / "electroadhesion.toml").read_text()
+    marker = 'name = "alpha"\n'
+    assert marker in card
+    path = tmp_path / "electroadhesion.toml"
+    path.write_text(card.replace(marker, marker + "rope = [0.95, 1.05]\n", 1))
+    alpha = next(q for q in skinfit.load_model(str(path)).parameters if q.name == "alpha")
+    assert alpha.rope == (0.95, 1.05)
+    path.write_text(card.replace(marker, marker + "rope = [1.05, 0.95]\n", 1))
+    with pytest.raises(skinfit.InputError, match=r"rope.*low < high"):
+        skinfit.load_model(str(path))
+
+
+def test_the_printed_summary_is_rounded_as_the_report(short_fits):
+    """``skinfit fit`` prints :meth:`Fit.report_text`: its table at the precision each sd
+    allows, under a line naming the interval."""
+    text = short_fits[0].report_text()
+    lines = text.splitlines()
+    at = next(i for i, line in enumerate(lines) if line.startswith("intervals: 94% HDI"))
+    header = ["parameter", *lines[at + 1].split()]
+    numeric = header[: header.index("contraction") + 1]
+    rows = [line.split()[: len(numeric)] for line in lines[at + 2:] if line.strip()]
+    assert len(rows) == len(short_fits[0].summary())
+    assert too_precise([numeric, *rows]) == []
+    assert too_precise([numeric, [*rows[0][:2], "37012.345", *rows[0][3:]]]) != []  # the check reads these rows

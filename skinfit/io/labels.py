@@ -125,7 +125,7 @@ def round_to_sd(value, sd):
     """``value`` as text at the precision its uncertainty ``sd`` allows: rounded to the decimal
     place of the second significant digit of ``sd`` (the convention of measurement reporting:
     ``round_to_sd(2.409213, 0.0123)`` is ``"2.409"``, ``round_to_sd(0.0123, 0.0123)`` is
-    ``"0.012"``); in powers of ten beyond 1e-3 .. 1e6 (``"2.41e-07"``). Without a usable ``sd``
+    ``"0.012"``); in powers of ten beyond 1e-4 .. 1e6 (``"2.41e-07"``). Without a usable ``sd``
     (0, NaN) three significant digits; a NaN value is ``"nan"``."""
     value = float(value)
     if not math.isfinite(value):
@@ -137,6 +137,6 @@ def round_to_sd(value, sd):
     if rounded == 0:  # zero at the resolution: its decimals say how close to zero
         return f"{0:.{-q}f}" if -6 <= q < 0 else "0"
     magnitude = math.floor(math.log10(abs(rounded)))
-    if -3 <= magnitude < 6:
+    if -4 <= magnitude < 6:
         return f"{rounded:.{max(0, -q)}f}"
     return f"{rounded:.{max(0, magnitude - q)}e}"

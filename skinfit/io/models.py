@@ -51,6 +51,7 @@ class Quantity:
     optional: bool = False  # covariates only: NaN allowed by design
     physical: tuple = (-math.inf, math.inf)  # parameters only: the range the physics allows
     display_unit: str = ""  # parameters only: the unit tables and figures show values in (kPa for a modulus)
+    rope: tuple | None = None  # parameters only: a region of practical equivalence of contrasts (ratio or difference)
 
 
 def resolve_forward(ref, where="forward", role="forward"):
@@ -234,7 +235,16 @@ def _quantities(doc, key, where, *, observable=False):
             if not same:
                 raise InputError(where, f"expected a unit of the dimension of {unit!r} (got {display!r}, a "
                                  f"{dimension(display)})", field=prefix + "display_unit")
-        out.append(Quantity(name, unit, desc, noise, optional, physical, display))
+        rope = None
+        if key == "parameters" and "rope" in item:
+            rope = require(item, "rope", list, where, field_prefix=prefix)
+            if (len(rope) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                          for v in rope) or not rope[0] < rope[1]):
+                raise InputError(where, "expected [low, high] finite numbers with low < high: the region of practical "
+                                 "equivalence of a contrast (a ratio A / B for a positive parameter, e.g. [0.9, 1.1]; "
+                                 f"else a difference A - B in SI) (got {rope!r})", field=prefix + "rope")
+            rope = (float(rope[0]), float(rope[1]))
+        out.append(Quantity(name, unit, desc, noise, optional, physical, display, rope))
     names = [q.name for q in out]
     dup = {n for n in names if names.count(n) > 1}
     if dup:

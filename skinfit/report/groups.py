@@ -11,6 +11,7 @@ figure jobs for :mod:`skinfit.report.html`.
 """
 
 import re
+import tomllib
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -35,7 +36,7 @@ from skinfit.results.summary import is_estimate_column
 __all__ = ["CONTRAST_ROWS", "contrast_display", "contrast_sentence", "shown_population_rows",
            "subject_label", "row_labels", "PopulationView", "subjects_section", "population_section",
            "contrast_section", "population_parameters", "group_analyses", "hyperprior_table", "sampler_text",
-           "population_for", "across_fits"]
+           "population_for", "across_fits", "card_ropes"]
 
 
 def subject_label(fit):
@@ -323,6 +324,13 @@ def contrast_sentence(table):
             + ".")
 
 
+def card_ropes(fit):
+    """Parameter -> the region of practical equivalence of its contrasts the fit's model card
+    gives (``rope = [low, high]`` on the effect's scale: a ratio for a positive parameter)."""
+    card = tomllib.loads(fit.attrs["model_card"])
+    return {p["name"]: tuple(p["rope"]) for p in card.get("parameters", []) if p.get("rope")}
+
+
 def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved=(), ci_prob=None):
     """Population results and contrasts for the fits of a ``--by`` run or a campaign.
 
@@ -395,9 +403,11 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
                 if echo:
                     echo(f"skinfit report: no population for {model_id} on {base}: {exc}")
         rows = []
+        ropes = card_ropes(next(iter(group.values())))
         for name in names:
             try:
-                rows.append(fit_contrasts(group, name, rng=seed, prob=prob).assign(parameter=name))
+                rows.append(fit_contrasts(group, name, rng=seed, prob=prob, rope=ropes.get(base_name(name)))
+                            .assign(parameter=name))
             except (InputError, ValueError) as exc:
                 if echo:
                     echo(f"skinfit report: no contrasts of {name} for {model_id}: {exc}")
@@ -408,7 +418,9 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
             contrasts[f"{model_id} on {base}: between subjects"] = table
     for (_key, f), label in zip(fits.items(), run_labels(fits.values())):  # two split fits: each its own table
         split = {s["base"] for s in f.attr("slots") if s["level"] is not None}
-        rows = [level_contrasts(f, name, prob=prob).assign(parameter=name) for name in sorted(split)]
+        ropes = card_ropes(f)
+        rows = [level_contrasts(f, name, prob=prob, rope=ropes.get(name)).assign(parameter=name)
+                for name in sorted(split)]
         if rows:
             table = pd.concat(rows, ignore_index=True)
             table.attrs.update(ci_prob=prob, ci_kind="hdi")

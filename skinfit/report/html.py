@@ -33,6 +33,7 @@ from skinfit.inference.checkpoint import CheckpointLock
 from skinfit.io.labels import derived_units, parameter_units
 from skinfit.io.paths import package_version
 from skinfit.io.references import cite_long
+from skinfit.plots.contrast_matrix import plot_contrast_matrix
 from skinfit.report.checks import (
     checked_text,
     comparison_issues,
@@ -42,7 +43,7 @@ from skinfit.report.checks import (
     section_issues,
 )
 from skinfit.report.design import design_section_html
-from skinfit.report.figures import fit_figure_jobs, render_figures
+from skinfit.report.figures import draw_figure, fit_figure_jobs, render_figures
 from skinfit.report.groups import (
     CONTRAST_ROWS,
     across_fits,
@@ -70,6 +71,9 @@ from skinfit.results.intervals import CI_PROB, check_ci, interval_name
 from skinfit.results.run_labels import run_labels
 
 __all__ = ["write_report", "cli_report", "claim_report_folder", "REPORT_MARKER"]
+
+#: Subjects (or levels) of a parameter from which its contrasts are also drawn as a matrix
+MATRIX_LABELS = 6
 
 #: A file in each report folder: the folder is the report's, to rewrite on the next report into it.
 REPORT_MARKER = ".skinfit-report"
@@ -219,6 +223,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             numbers = shown.select_dtypes("number")
             shown = shown[numbers.notna().any(axis=1).to_numpy()]  # a row of n/a only: in the CSV alone
             shown = display_units(shown, fit)
+            shown["note"] = shown["note"].str.replace(r"^derived \[.*\]$", "derived", regex=True)  # unit: its column
             derived = np.isin([base_name(n) for n in shown.index], list(derived_units(fit)))  # no MAP, tau, prior
             named = level_names(fit)
             shown.index = [named.get(n, n) for n in shown.index]
@@ -277,7 +282,23 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
         full = contrast_section(table)
         full.to_csv(out / f"{stem}.csv", index=False)
         top = contrast_display(full.head(CONTRAST_ROWS))
+        figures = []
+        order = list(dict.fromkeys([*table["A"], *table["B"]]))  # subjects or levels as the table lists them
+        for pname, rows in (full.groupby("parameter", sort=False) if "parameter" in full.columns else ()):
+            if len(set(rows["A"]) | set(rows["B"])) < MATRIX_LABELS:  # a few pairs: the table says it all
+                continue
+            path = figdir / f"{stem}_{file_part(str(pname))}.png"
+            error = draw_figure(lambda rows=rows, pname=pname, order=order:
+                                plot_contrast_matrix(rows, pname, order=order), path)
+            if error:
+                issues_all.append({"status": "WARN", "anchor": f"contrasts-{len(contrast_tables) + 1}",
+                                   "where": f"contrasts: {name}", "text": error})
+            else:
+                figures.append({"file": f"figures/{path.name}", "alt": f"matrix of the contrasts of {pname}",
+                                "caption": f"{pname}: the effect of each row's subject against each column's "
+                                           f"({len(rows)} pairs); dots: probability of direction above 0.95"})
         contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(full), "shown": len(top),
+                                "figures": figures,
                                 "ci": interval_name(table.attrs.get("ci_prob", ci_prob)),
                                 "rope": table.attrs.get("rope"), "sentence": contrast_sentence(full),
                                 "id": f"contrasts-{len(contrast_tables) + 1}", "issues": contrast_issues(table),
@@ -391,15 +412,17 @@ def _summary_md(ctx):
     for a in ctx["across"]:
         lines += ["", f"## {a['model_id']} across fits: {', '.join(a['fits'])}", ""]
         for tb in a["tables"]:
-            lines += ["", f"### {tb['parameter']} per subject", "", markdown(tb["table"])]
+            unit = f" [{tb['unit']}]" if tb.get("unit") not in (None, "", "1") else ""
+            lines += ["", f"### {tb['parameter']} per subject{unit}", "", markdown(tb["table"])]
         if a["population"]:
             lines += ["", "### Population", "", markdown(a["population"]["hyper"])]
             for tb in a["population"]["subjects"]:
                 lines += ["", f"#### {tb['parameter']}: separate and shrunk", "", markdown(tb["table"])]
         lines += [f"![{f['alt']}]({f['file']})" for f in a["figures"]]
     for c in ctx["contrasts"]:
-        lines += ["", f"## Contrasts: {c['name']}", "", c["sentence"], "", markdown(c["table"]), "",
-                  f"CSV: `{c['csv']}` (all {c['n']} comparisons)"]
+        lines += ["", f"## Contrasts: {c['name']}", "", c["sentence"], ""]
+        lines += [f"![{f['alt']}]({f['file']})" for f in c["figures"]]
+        lines += ["", markdown(c["table"]), "", f"CSV: `{c['csv']}` (all {c['n']} comparisons)"]
     for s in ctx["sections"]:
         lines += ["", f"## {s['where']}", "", f"Produced by {s['prov_line']}.", "",
                   f"Model: {s['prov']['model_title']} ({s['prov']['model_source']}).", "",

@@ -59,6 +59,7 @@ def run(args):
                           "seed": int(result.attrs["seed"]),
                           "converged": bool(result.converged), "warnings": result.warnings, "notes": result.notes,
                           "summary": json.loads(summary.to_json(orient="index")),
+                          "ci_prob": summary.attrs.get("ci_prob"), "ci_kind": summary.attrs.get("ci_kind"),
                           "seconds": time.perf_counter() - t0}, indent=2, default=str))
     else:
         print(result.report_text(summary))
