@@ -5,6 +5,7 @@ import warnings
 import numpy as np
 import pytest
 from popdata import write_population
+from scipy import stats
 
 import skinfit
 from skinfit.analysis.contrasts import contrast, fit_contrasts, hdi, level_contrasts
@@ -65,12 +66,43 @@ def test_contrast_closed_form():
     rng = np.random.default_rng(1)
     a, b = rng.normal(1.0, 0.1, 20000), rng.normal(0.9, 0.1, 20000)
     out = contrast(a, b)
-    # A - B ~ N(0.1, 0.1*sqrt 2): P(A > B) = Phi(0.1 / 0.1414) = 0.760, 95% HDI = 0.1 -+ 0.277
+    # A - B ~ N(0.1, 0.1*sqrt 2): P(A > B) = Phi(0.1 / 0.1414) = 0.760, 94% HDI = 0.1 -+ 1.881 * 0.1414
     assert out["p_greater"] == pytest.approx(0.760, abs=0.01)
-    assert out["diff_lower"] == pytest.approx(0.1 - 0.2772, abs=0.01)
-    assert out["diff_upper"] == pytest.approx(0.1 + 0.2772, abs=0.01)
+    assert out["diff_lower"] == pytest.approx(0.1 - 0.2660, abs=0.01)
+    assert out["diff_upper"] == pytest.approx(0.1 + 0.2660, abs=0.01)
+    wide = contrast(a, b, prob=0.95)  # the probability set by the caller: 0.1 -+ 1.96 * 0.1414
+    assert wide["diff_lower"] == pytest.approx(0.1 - 0.2772, abs=0.01)
     with pytest.raises(ValueError, match="paired"):
         contrast(a, b[:10])
+
+
+def test_contrast_effect_is_a_difference_with_its_rope_probability():
+    """Negative draws: the effect is the difference A - B ~ N(0.1, 0.1414); its probability of
+    direction Phi(0.1 / 0.1414) and P(-0.05 < A - B < 0.05) from the normal cdf."""
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(-0.4, 0.1, 40000), rng.normal(-0.5, 0.1, 40000)
+    out = contrast(a, b, rope=(-0.05, 0.05))
+    s = 0.1 * np.sqrt(2)
+    assert out["effect"] == "difference" and out["estimate"] == pytest.approx(0.1, abs=0.005)
+    assert out["sd"] == pytest.approx(s, rel=0.02)
+    assert out["prob_direction"] == pytest.approx(stats.norm.cdf(0.1 / s), abs=0.01)
+    assert out["p_rope"] == pytest.approx(stats.norm.cdf(-0.05 / s) - stats.norm.cdf(-0.15 / s), abs=0.01)
+    assert np.isnan(contrast(a, b)["p_rope"])  # no region given: none computed
+    with pytest.raises(skinfit.InputError, match="rope"):
+        contrast(a, b, rope=(0.1, -0.1))
+
+
+def test_contrast_of_a_positive_parameter_is_a_ratio():
+    """Log-normal draws: A / B = exp(N(0.1, 0.1414)): median e^0.1, and P(0.95 < A / B < 1.05)
+    from the normal cdf of the log."""
+    rng = np.random.default_rng(3)
+    a, b = np.exp(rng.normal(0.1, 0.1, 40000)), np.exp(rng.normal(0.0, 0.1, 40000))
+    out = contrast(a, b, rope=(0.95, 1.05))
+    s = 0.1 * np.sqrt(2)
+    assert out["effect"] == "ratio" and out["estimate"] == pytest.approx(np.exp(0.1), rel=0.01)
+    assert out["lower"] == out["ratio_lower"] and out["upper"] == out["ratio_upper"]
+    assert out["p_rope"] == pytest.approx(stats.norm.cdf((np.log(1.05) - 0.1) / s)
+                                          - stats.norm.cdf((np.log(0.95) - 0.1) / s), abs=0.01)
 
 
 @pytest.mark.parametrize("prob", [0.5, 0.94, 0.95, 1.0])

@@ -381,10 +381,10 @@ def test_two_observables_one_row_each_and_one_against_the_other(standin, tmp_pat
     axes = [a for a in fig.axes if a.get_visible()]
     assert len(axes) == 9  # (area, impedance, area vs impedance) x 3 actuation forces
     assert [a.get_title() for a in axes[:3]] == [f"actuation force = {v} mN" for v in (0, 200, 400)]
-    assert {a.get_ylabel() for a in axes[:3]} == {"contact area [mm^2]"}
-    assert {a.get_ylabel() for a in axes[3:6]} == {"impedance [N*s/m]"}
+    assert {a.get_ylabel() for a in axes[:3]} == {"contact area [mm²]"}
+    assert {a.get_ylabel() for a in axes[3:6]} == {"impedance [N·s/m]"}
     assert {a.get_xlabel() for a in axes[:6]} == {"normal force [N]"}
-    assert {(a.get_xlabel(), a.get_ylabel()) for a in axes[6:]} == {("impedance [N*s/m]", "contact area [mm^2]")}
+    assert {(a.get_xlabel(), a.get_ylabel()) for a in axes[6:]} == {("impedance [N·s/m]", "contact area [mm²]")}
     assert all(a.get_xscale() == "log" and a.get_yscale() == "log" for a in axes)
     bands = plots.ppc_bands(fit)
     area = bands[bands["observable"] == "contact_area"]

@@ -74,14 +74,29 @@ def test_a_references_file_on_the_search_path_adds_keys(tmp_path, monkeypatch):
     (tmp_path / "references.toml").write_text('schema_version = 1\n[mylab2026]\ntitle = "Our own model"\n'
                                               'authors = ["A. Researcher"]\nyear = 2026\n')
     monkeypatch.setenv("SKINFIT_PATH", str(tmp_path))
-    assert cite("mylab2026, eq. 2") == "Our own model, eq. 2"
+    assert cite("mylab2026, eq. 2") == "Researcher (2026), \u201cOur own model\u201d, eq. 2"
     assert check_source("mylab2026, eq. 2; fujii_wavy, eq. 13", "card.toml", "source")
 
 
 def test_cite_spells_out_keys_and_keeps_locators():
     assert parse_source("fujii_wavy, Section 6.2: n = -0.3; more on it; dzidek2017: E ~ 40 kPa") == [
         ("fujii_wavy", "Section 6.2: n = -0.3; more on it"), ("dzidek2017", "E ~ 40 kPa")]
-    assert cite("fujii_wavy, eq. 13; dzidek2017") == "Fujii, Okamoto & Yamada, eq. 13; Dzidek et al. 2017"
+    assert cite("fujii_wavy, eq. 13; dzidek2017") == (
+        "Fujii, Okamoto & Yamada, \u201cFriction model of fingertip sliding over wavy surface for friction-variable "
+        "tactile feedback panel\u201d, eq. 13; Dzidek et al. (2017), \u201cContact mechanics of the human finger pad "
+        "under compressive loads\u201d, Journal of the Royal Society Interface 14(127):20160935")
+
+
+def test_one_citation_style_names_authors_and_year_where_known():
+    """Authors (year), title, venue, where: the electroadhesion paper by its authors and year;
+    a work without known authors by its title and year; a long author list as 'et al.'."""
+    assert cite("electroadhesion_friction, eq. 6").startswith("Basdogan, Sormoli & Sirin (2020), \u201cModeling "
+                                                               "Sliding Friction")
+    assert cite("electroadhesion_friction, eq. 6").endswith(", IEEE Transactions on Haptics, eq. 6")
+    assert cite("textured_elasticity").startswith("\u201cAn Empirical Approach") and "(2019), Biotribology" in \
+        cite("textured_elasticity")
+    assert cite("torres_ultrasonic").startswith("Torres et al., \u201cMechanisms")
+    assert cite("adams2013").startswith("Adams et al. (2013)")  # the file's list ends in "et al."
 
 
 @pytest.mark.parametrize("path", sorted(ROOT.glob("models/*.toml")), ids=lambda p: p.stem)

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 import skinfit
+from skinfit.io.units import pretty_unit
 from skinfit.report import html as report
 from skinfit.report.groups import contrast_section, group_analyses, subject_label
 from skinfit.report.tables import level_names, ranking_note
@@ -80,16 +81,19 @@ def test_report_on_subjects_shows_tables_population_and_contrasts(subject_fits, 
         assert (table.loc[derived, ["map", "tau", "contraction"]] == "n/a").all().all()
         # a derived quantity's unit in the unit column, as its note and the card state it
         card_units = json.loads(next(iter(subject_fits.values())).attrs["derived"])["quantities"]
-        assert [card_units[n.split("[")[0]] for n in table.index[derived]] == list(table.loc[derived, "unit"])
-        assert all(f"[{u}]" in note for u, note in zip(table.loc[derived, "unit"], table.loc[derived, "note"]))
+        assert [re.sub("<[^>]+>", "", pretty_unit(card_units[n.split("[")[0]], html=True))
+                for n in table.index[derived]] == list(table.loc[derived, "unit"])
+        assert (table.loc[derived, "note"] == "derived").all()  # its unit in the unit column, written once
         assert not table.loc[derived, diag + ["mean"]].isin(["n/a", "nan"]).any().any()
         assert not table.loc[~derived].isin(["n/a", "nan"]).any().any()
-    # a ratio A / B where B's draws change sign (m1, a slope about 0): n/a, as its CSV cell is empty
+    # a ratio A / B where B's draws change sign (m1, a slope about 0) is undefined, its CSV cell
+    # empty: the effect shown is the difference
     (key, shown_contrasts), = [(k, _frame(t)) for k, t in page.tables.items() if k[0] == "contrasts"]
-    csv = pd.read_csv(tmp_path / "r" / key[1]).head(len(shown_contrasts))
+    csv = pd.read_csv(tmp_path / "r" / key[1])
     undefined = csv["ratio_median"].isna().to_numpy()
     assert undefined.any() and (~undefined).any()
-    assert (shown_contrasts["ratio_median"].to_numpy() == "n/a").tolist() == undefined.tolist()
+    assert (csv.loc[undefined, "effect"] == "difference").all()
+    assert list(shown_contrasts["effect"]) == list(csv["effect"].head(len(shown_contrasts)))
     nans = [(k, row) for k, t in page.tables.items() for row in t["rows"] if "nan" in row]
     assert not nans, nans[:3]
 
@@ -115,7 +119,7 @@ def test_population_band_is_where_94_percent_of_subjects_lie():
     class Result:
         parameters, subjects = ["E"], ["S01"]
 
-        def summary(self):
+        def summary(self, prob=0.94):
             return pd.DataFrame([{"parameter": "E", "quantity": "mu", "estimate": np.log(2e4), "lower": 0.0,
                                   "upper": 0.0, "coordinate": "log"},
                                  {"parameter": "E", "quantity": "tau", "estimate": 0.5, "lower": 0.0,
@@ -137,14 +141,14 @@ def test_a_report_section_computes_the_population_summary_once():
     class Result:
         parameters, subjects, calls = ["E", "F", "G"], ["S01"], 0
 
-        def summary(self):
+        def summary(self, prob=0.94):
             Result.calls += 1
             return pd.DataFrame([{"parameter": p, "quantity": q, "estimate": v, "lower": 0.0, "upper": 0.0,
                                   "coordinate": "log"}
                                  for p, mu in zip(self.parameters, (1e3, 2e4, 3e5))
                                  for q, v in (("mu", np.log(mu)), ("tau", 0.5))])
 
-        def subject_summary(self):
+        def subject_summary(self, prob=0.94):
             return pd.DataFrame([{"parameter": p, "subject": "S01", "estimate": 1.0} for p in self.parameters])
 
     section = population_section(Result())

@@ -3,12 +3,13 @@
 stored in), the suffix of noise parameters, and the labels of the levels of grouping columns."""
 
 import json
+import math
 import tomllib
 
 from skinfit.io.units import si_unit, to_si
 
 __all__ = ["variable_attrs", "annotate", "noise_suffix", "noise_parameter_names", "level_labels", "parameter_units",
-           "derived_units"]
+           "derived_units", "sd_resolution", "round_to_sd"]
 
 
 def noise_suffix(observables, obs):
@@ -107,3 +108,36 @@ def annotate(tree, post):
             elif var in attrs:
                 node[var].attrs.update(attrs[var])
     return tree
+
+
+def sd_resolution(sd):
+    """The power of ten of the second significant digit of an uncertainty ``sd`` (``-4`` for
+    sd 0.0123: estimates are given to 0.0001), or None when ``sd`` is not a finite number > 0."""
+    try:
+        sd = float(sd)
+    except (TypeError, ValueError):
+        return None
+    if not math.isfinite(sd) or sd <= 0:
+        return None
+    return math.floor(math.log10(sd)) - 1
+
+
+def round_to_sd(value, sd):
+    """``value`` as text at the precision its uncertainty ``sd`` allows: rounded to the decimal
+    place of the second significant digit of ``sd`` (the convention of measurement reporting:
+    ``round_to_sd(2.409213, 0.0123)`` is ``"2.409"``, ``round_to_sd(0.0123, 0.0123)`` is
+    ``"0.012"``); in powers of ten beyond 1e-4 .. 1e6 (``"2.41e-07"``). Without a usable ``sd``
+    (0, NaN) three significant digits; a NaN value is ``"nan"``."""
+    value = float(value)
+    if not math.isfinite(value):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    q = sd_resolution(sd)
+    if q is None:
+        return f"{value:.3g}"
+    rounded = round(value, -q)
+    if rounded == 0:  # zero at the resolution: its decimals say how close to zero
+        return f"{0:.{-q}f}" if -6 <= q < 0 else "0"
+    magnitude = math.floor(math.log10(abs(rounded)))
+    if -4 <= magnitude < 6:
+        return f"{rounded:.{max(0, -q)}f}"
+    return f"{rounded:.{max(0, magnitude - q)}e}"

@@ -32,7 +32,7 @@ from skinfit.io.paths import display
 from skinfit.io.references import check_file_source
 from skinfit.io.registry import lookup, register, resolve
 from skinfit.io.toml import available, find_file, read_toml, require, sha256_file
-from skinfit.io.units import check_model_unit
+from skinfit.io.units import check_model_unit, dimension, same_dimension
 from skinfit.io.user_functions import adapt, check_source_hash, function_card, import_function
 from skinfit.io.user_priors import as_prior_set
 
@@ -53,6 +53,8 @@ class Quantity:
     noise: str | None = None  # observables only
     optional: bool = False  # covariates only: NaN allowed by design
     physical: tuple = (-math.inf, math.inf)  # parameters only: the range the physics allows
+    display_unit: str = ""  # parameters only: the unit tables and figures show values in (kPa for a modulus)
+    rope: tuple | None = None  # parameters only: a region of practical equivalence of contrasts (ratio or difference)
 
 
 def resolve_forward(ref, where="forward", role="forward"):
@@ -255,7 +257,26 @@ def _quantities(doc, key, where, *, observable=False):
                 raise InputError(where, f"expected [lower, upper] numbers with lower < upper, inf allowed "
                                  f"(got {physical!r})", field=prefix + "physical")
             physical = (float(physical[0]), float(physical[1]))
-        out.append(Quantity(name, unit, desc, noise, optional, physical))
+        display = ""
+        if key == "parameters" and "display_unit" in item:
+            display = require(item, "display_unit", str, where, field_prefix=prefix)
+            try:
+                same = same_dimension(display, unit)
+            except ValueError as exc:
+                raise InputError(where, str(exc), field=prefix + "display_unit") from None
+            if not same:
+                raise InputError(where, f"expected a unit of the dimension of {unit!r} (got {display!r}, a "
+                                 f"{dimension(display)})", field=prefix + "display_unit")
+        rope = None
+        if key == "parameters" and "rope" in item:
+            rope = require(item, "rope", list, where, field_prefix=prefix)
+            if (len(rope) != 2 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                          for v in rope) or not rope[0] < rope[1]):
+                raise InputError(where, "expected [low, high] finite numbers with low < high: the region of practical "
+                                 "equivalence of a contrast (a ratio A / B for a positive parameter, e.g. [0.9, 1.1]; "
+                                 f"else a difference A - B in SI) (got {rope!r})", field=prefix + "rope")
+            rope = (float(rope[0]), float(rope[1]))
+        out.append(Quantity(name, unit, desc, noise, optional, physical, display, rope))
     names = [q.name for q in out]
     dup = {n for n in names if names.count(n) > 1}
     if dup:

@@ -4,7 +4,8 @@
 A shipped card's ``source`` is one or more citations joined by ``"; "``, each ``KEY`` or
 ``KEY, where`` (``"fujii_wavy, eq. 13"``); :func:`check_source` refuses an unknown key at load
 time (a user's own file may give free text: :func:`check_file_source`) and :func:`cite` renders
-a source for readers (``Fujii, Okamoto & Yamada, eq. 13``).
+a source for readers, in one style everywhere: ``Authors (year), “title”, venue, where``
+(:func:`citation`).
 """
 
 import re
@@ -17,7 +18,8 @@ from types import MappingProxyType
 from skinfit.errors import InputError
 from skinfit.io.paths import search_path, shipped_root
 
-__all__ = ["references", "full", "cite_long", "parse_source", "check_source", "check_file_source", "cite"]
+__all__ = ["references", "full", "cite_long", "parse_source", "check_source", "check_file_source", "cite", "citation",
+           "authors_text"]
 
 _KEY = re.compile(r"^([a-z][a-z0-9_]*)(?:\s*[,:]\s*(.*))?$", re.S)
 _FIELDS = {"title", "authors", "venue", "year", "doi", "note", "short"}
@@ -93,17 +95,46 @@ def check_file_source(source, file, where, field):
     return source
 
 
+def authors_text(ref):
+    """The authors of a work as a citation names them: surnames, ``A``, ``A & B``,
+    ``A, B & C``, ``A et al.`` beyond three (or when the list ends in ``et al.``); empty when
+    the references file does not know them."""
+    names = [n for n in ref.get("authors", []) if n.strip()]
+    etal = bool(names) and names[-1].strip().rstrip(".").lower() == "et al"
+    surnames = [n.split()[-1] for n in names if n.strip().rstrip(".").lower() != "et al"]
+    if not surnames:
+        return ""
+    if etal or len(surnames) > 3:
+        return f"{surnames[0]} et al."
+    return surnames[0] if len(surnames) == 1 else f"{', '.join(surnames[:-1])} & {surnames[-1]}"
+
+
+def citation(key, where=""):
+    """One work as every place of skinfit cites it: ``Authors (year), “title”, venue, where``
+    (``Fujii, Okamoto & Yamada, “Friction model of fingertip sliding ...”, eq. 13``), the
+    fields the references file does not know left out."""
+    ref = references()[key]
+    authors, year, title = authors_text(ref), ref.get("year"), ref["title"]
+    if authors:
+        parts = [f"{authors} ({year})" if year else authors, f"\u201c{title}\u201d"]
+    else:  # a work whose authors the file does not know: named by its title
+        parts = [f"\u201c{title}\u201d ({year})" if year else title]
+    parts += [str(ref["venue"])] if "venue" in ref else []
+    parts += [where] if where else []
+    return ", ".join(parts)
+
+
 def cite(source):
-    """A source as readers see it: each key replaced by the work's short name; unknown text kept."""
+    """A source as readers see it, in one style everywhere (report, summary.md, ``skinfit
+    models`` and ``skinfit priors``): each cited work as :func:`citation` gives it, with its
+    locator (equation, section); text that is not a known key kept as written."""
     known = references()
     out = []
     for key, loc in parse_source(source):
-        ref = known.get(key)
-        if ref is None:
+        if key not in known:
             out.append(loc if key is None else f"{key}, {loc}" if loc else key)
-            continue
-        name = ref.get("short", ref["title"])
-        out.append(f"{name}, {loc}" if loc else name)
+        else:
+            out.append(citation(key, loc))
     return "; ".join(out)
 
 
@@ -119,8 +150,8 @@ def full(key):
 
 
 def cite_long(source):
-    """:func:`cite` followed by the full reference of each work cited, for reports."""
+    """:func:`cite` with the DOI of each work that has one, for reports."""
     known = references()
-    keys = [k for k, _ in parse_source(source) if k in known]
-    works = "; ".join(full(k) for k in dict.fromkeys(keys))
-    return f"{cite(source)} ({works})" if works else cite(source)
+    dois = [f"doi:{known[k]['doi']}" for k in dict.fromkeys(k for k, _ in parse_source(source))
+            if k in known and "doi" in known[k]]
+    return f"{cite(source)} ({'; '.join(dois)})" if dois else cite(source)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 __all__ = ["Unit", "parse_unit", "to_si", "si_unit", "dimension", "check_model_unit", "same_dimension", "UNITS",
-           "NONNEGATIVE", "SYMBOLS", "PREFIXES", "OTHER"]
+           "NONNEGATIVE", "SYMBOLS", "PREFIXES", "OTHER", "pretty_unit", "unit_mathtext"]
 
 _L, _M, _T, _I, _K = "[length]", "[mass]", "[time]", "[current]", "[temperature]"
 #: SI symbols -> (factor to the coherent SI unit, dimension exponents)
@@ -177,3 +177,80 @@ def si_unit(unit):
 
 
 _BASE = {_L: "m", _M: "kg", _T: "s", _I: "A", _K: "K"}
+
+
+_SUPERSCRIPT = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
+_LETTERS = dict(zip("abcdefghijklmnoprstuvwxyz", "ᵃᵇᶜᵈᵉᶠᵍʰⁱʲᵏˡᵐⁿᵒᵖʳˢᵗᵘᵛʷˣʸᶻ"))
+_POWER = re.compile(r"\^(\([^)]*\)|-?\d+|[A-Za-z_][A-Za-z0-9_]*)")
+_MICRO = re.compile(r"(?<![A-Za-z])u(?=(?:m|N|s|V|A|g|Pa|J|W|C|F|Hz|rad)\b)")
+
+
+def _power_html(power):
+    """A power of a unit as HTML: ``n_z`` -> ``n<sub>z</sub>``, ``(1-c)`` -> ``1−c``."""
+    power = power.strip("()").replace("-", "\u2212")
+    name, _, sub = power.partition("_")
+    return f"<sup>{name}{f'<sub>{sub}</sub>' if sub else ''}</sup>"
+
+
+def pretty_unit(text, html=False):
+    """A unit of the grammar above as a physicist writes it: ``N*s/m`` -> ``N·s/m``,
+    ``m^2`` -> ``m²``, ``um`` -> ``µm``, ``ohm`` -> ``Ω``; a power that is a symbol of the model
+    (``m^2/N^m_a``) as a superscript in ``html`` (``m²/N<sup>m<sub>a</sub></sup>``), in plain
+    text in superscript letters where Unicode has them (``m²/Nᵐ``), else kept as ``^m_a``;
+    ``1`` (dimensionless) stays ``1``."""
+    if not isinstance(text, str) or text.strip() in ("", "1", "-"):
+        return text
+
+    def power(m):
+        p = m.group(1)
+        if re.fullmatch(r"-?\d+", p):
+            return p.translate(_SUPERSCRIPT)
+        if not html and all(c in _LETTERS for c in p):  # N^m -> Nᵐ
+            return "".join(_LETTERS[c] for c in p)
+        if html:
+            return _power_html(p)
+        return m.group(0)
+
+    out = text.strip().replace("ohm", "\u03a9")
+    out = _MICRO.sub("\u00b5", out)
+    if html:  # the text around the powers escaped; the powers are markup
+        parts, pos = [], 0
+        for m in _POWER.finditer(out):
+            parts += [_escape(out[pos:m.start()]), power(m)]
+            pos = m.end()
+        out = "".join(parts) + _escape(out[pos:])
+    else:
+        out = _POWER.sub(power, out)
+    return out.replace("*", "\u00b7")
+
+
+def _escape(text):
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def unit_mathtext(text):
+    r"""A unit as matplotlib mathtext for axis labels (``m^2/N^m_a`` -> ``$\mathrm{m}^{2}/\mathrm{N}^{m_{a}}$``):
+    every power a superscript, ``*`` a centred dot; ``1`` (dimensionless) stays ``1``."""
+    if not isinstance(text, str) or text.strip() in ("", "1", "-"):
+        return text
+    out = _MICRO.sub("\u00b5", text.strip().replace("ohm", r"\Omega"))
+
+    def power(m):
+        p = m.group(1).strip("()")
+        name, _, sub = p.partition("_")
+        return "^{" + name + ("_{" + sub + "}" if sub else "") + "}"
+
+    tokens = re.split(r"(\^(?:\([^)]*\)|-?\d+|[A-Za-z_][A-Za-z0-9_]*)|[*/])", out)
+    parts = []
+    for t in tokens:
+        if not t:
+            continue
+        if t.startswith("^"):
+            parts.append(power(_POWER.match(t)))
+        elif t == "*":
+            parts.append(r"\cdot ")
+        elif t == "/":
+            parts.append("/")
+        else:
+            parts.append(r"\mathrm{" + t + "}")
+    return "$" + "".join(parts) + "$"

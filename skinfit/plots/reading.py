@@ -7,7 +7,7 @@ import numpy as np
 
 from skinfit.io.labels import parameter_units as card_parameter_units
 from skinfit.io.priors import parse_prior
-from skinfit.io.units import to_si
+from skinfit.io.units import pretty_unit, to_si, unit_mathtext
 from skinfit.results.fit import as_fit
 
 __all__ = ["model_card", "data_units", "unit_factor", "axis_label", "param_label", "slot_label",
@@ -36,7 +36,13 @@ def unit_factor(unit):
 
 
 def _unit_text(unit):
-    return "-" if unit in ("1", "-", "") else unit
+    """A unit in a figure label as a physicist writes it: ``N·s/m``, ``m²/Nᵐ``
+    (:func:`skinfit.io.units.pretty_unit`); mathtext where plain text has no superscript for
+    a power (``N^n_z``); ``-`` for a dimensionless quantity."""
+    if unit in ("1", "-", ""):
+        return "-"
+    text = pretty_unit(unit)
+    return unit_mathtext(unit) if "^" in text else text
 
 
 def axis_label(name, unit=None):

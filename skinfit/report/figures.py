@@ -21,6 +21,7 @@ from skinfit.inference.checkpoint import watch_parent
 from skinfit.inference.workers import forkable
 from skinfit.io.paths import code_hash
 from skinfit.report.figure_folder import SUFFIXES, FigureFolder
+from skinfit.results.intervals import CI_PROB, interval_name
 
 __all__ = ["FIGURES", "MANY_FITS", "MAX_FIGURE_WORKERS", "fit_figure_jobs", "split_parameters", "job_keys",
            "render_figures", "render_one", "draw_figure"]
@@ -67,7 +68,7 @@ def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
     for pname, dims in split_parameters(fit).items():
         path = figdir / f"{key}_forest_{pname}.png"
         entry = {"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
-                 "caption": f"{pname} per {dims}: posterior mean and 94% HDI",
+                 "caption": f"{pname} per {dims}: posterior mean and {interval_name(CI_PROB)}",
                  "alt": f"forest plot of {pname} per {dims} ({where})"}
         jobs.append({"fit": index, "func": "plot_forest", "args": (pname,), "path": path, "entry": entry})
     return jobs

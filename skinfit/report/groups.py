@@ -11,9 +11,11 @@ figure jobs for :mod:`skinfit.report.html`.
 """
 
 import re
+import tomllib
 import warnings
 from dataclasses import replace
 from pathlib import Path
+from statistics import NormalDist
 
 import numpy as np
 import pandas as pd
@@ -23,13 +25,18 @@ from skinfit.analysis.population.inputs import subject_digest
 from skinfit.analysis.population.population import population as fit_population
 from skinfit.analysis.population.result import DERIVED
 from skinfit.errors import InputError
+from skinfit.io.labels import parameter_units
+from skinfit.io.units import to_si
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
-from skinfit.report.tables import cells, file_part, not_applicable, unique_name
+from skinfit.report.tables import base_name, cells, display_unit_map, file_part, not_applicable, unique_name, unit_cell
+from skinfit.results.intervals import CI_PROB, interval_columns, interval_name
 from skinfit.results.run_labels import run_labels
+from skinfit.results.summary import is_estimate_column
 
-__all__ = ["subject_label", "row_labels", "PopulationView", "subjects_section", "population_section",
+__all__ = ["CONTRAST_ROWS", "contrast_display", "contrast_sentence", "shown_population_rows",
+           "subject_label", "row_labels", "PopulationView", "subjects_section", "population_section",
            "contrast_section", "population_parameters", "group_analyses", "hyperprior_table", "sampler_text",
-           "population_for", "across_fits"]
+           "population_for", "across_fits", "card_ropes"]
 
 
 def subject_label(fit):
@@ -59,8 +66,9 @@ class PopulationView:
     other accessors needs only this class changed.
     """
 
-    def __init__(self, result):
+    def __init__(self, result, ci_prob=CI_PROB):
         self.result = result
+        self.ci_prob = ci_prob
         self._hyper = None
 
     @property
@@ -73,15 +81,16 @@ class PopulationView:
 
     def hyper_table(self):
         """Per parameter and quantity (population mean, sd, median; mu, tau in the sampling
-        coordinate; correlations): estimate (median) and 95% interval. Computed once per view
-        (with the R-hat and ESS of every hyper-parameter): the report reads it per parameter."""
+        coordinate; correlations): estimate (median), sd and HDI at the view's ``ci_prob``.
+        Computed once per view (with the R-hat and ESS of every hyper-parameter): the report
+        reads it per parameter."""
         if self._hyper is None:
-            self._hyper = self.result.summary()
+            self._hyper = self.result.summary(self.ci_prob)
         return self._hyper.copy()
 
     def subject_table(self):
-        """Per subject and parameter: separate-fit and shrunk median and 95% interval."""
-        return self.result.subject_summary()
+        """Per subject and parameter: separate-fit and shrunk median and HDI at ``ci_prob``."""
+        return self.result.subject_summary(self.ci_prob)
 
     def hyperpriors(self):
         return {k: v for k, v in dict(getattr(self.result, "hyperpriors", {}) or {}).items() if not k.startswith("_")}
@@ -90,7 +99,7 @@ class PopulationView:
         """Conditions as effects (a slope with a condition against 0, split levels against the
         first): probabilities and intervals; None when the result has no such questions."""
         effects = getattr(self.result, "effects", None)
-        table = effects() if callable(effects) else None
+        table = effects(self.ci_prob) if callable(effects) else None
         return table if table is not None and len(table) else None
 
     def warnings(self):
@@ -109,27 +118,29 @@ class PopulationView:
 
     def population_interval(self, parameter):
         """The population distribution of ``parameter`` (natural units) at the posterior medians
-        of its hyper-parameters: median and central 94% range, ``mu -+ 1.881 tau`` in the
-        sampling coordinate (exponentiated for a log coordinate), i.e. where 94% of subjects
-        are expected to lie; None when the result has no such rows."""
+        of its hyper-parameters: median and central range of the view's ``ci_prob`` (94%:
+        ``mu -+ 1.881 tau``) in the sampling coordinate (exponentiated for a log coordinate),
+        i.e. where that share of subjects is expected to lie; None when the result has no such rows."""
         t = self.hyper_table()
         rows = t[t["parameter"] == parameter].set_index("quantity")
         if not {"mu", "tau"} <= set(rows.index):
             return None
         mu, tau = float(rows.loc["mu", "estimate"]), float(rows.loc["tau", "estimate"])
         back = np.exp if rows.loc["mu", "coordinate"] == "log" else (lambda v: v)
-        return {"median": float(back(mu)), "lo": float(back(mu - 1.881 * tau)), "hi": float(back(mu + 1.881 * tau))}
+        z = NormalDist().inv_cdf(0.5 + self.ci_prob / 2)
+        return {"median": float(back(mu)), "lo": float(back(mu - z * tau)), "hi": float(back(mu + z * tau))}
 
 
-def subjects_section(fits):
-    """Per parameter, a table of each subject's posterior (mean, sd, 94% HDI, R-hat, ESS).
+def subjects_section(fits, ci_prob=CI_PROB):
+    """Per parameter, a table of each subject's posterior (mean, sd, HDI at ``ci_prob``, R-hat, ESS).
 
     ``fits``: {key: Fit} of one model. Returns {"labels": {key: label}, "tables": {parameter:
     DataFrame indexed by subject label}}: a row per fit, fits of one subject told apart by
     :func:`row_labels`.
     """
     labels = row_labels(fits)
-    summaries = {key: f.summary() for key, f in fits.items()}
+    summaries = {key: f.summary(ci_prob) for key, f in fits.items()}
+    lower, upper = interval_columns(ci_prob)
     first = next(iter(fits.values()))
     tables = {}
     for s in first.attr("slots"):
@@ -138,8 +149,8 @@ def subjects_section(fits):
         for key, table in summaries.items():
             if name in table.index:
                 r = table.loc[name]
-                rows[labels[key]] = {"mean": r["mean"], "sd": r["sd"], "hdi_3%": r["hdi_3%"],
-                                     "hdi_97%": r["hdi_97%"], "r_hat": r["r_hat"], "ess_bulk": r["ess_bulk"]}
+                rows[labels[key]] = {"mean": r["mean"], "sd": r["sd"], lower: r[lower],
+                                     upper: r[upper], "r_hat": r["r_hat"], "ess_bulk": r["ess_bulk"]}
         if rows:
             frame = pd.DataFrame.from_dict(rows, orient="index")
             frame.index.name = "subject"
@@ -163,7 +174,7 @@ def row_labels(fits):
     return labels
 
 
-def population_section(result):
+def population_section(result, ci_prob=CI_PROB):
     """Tables of a population result: hyper-parameters, and shrunk beside separate estimates.
 
     Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
@@ -171,7 +182,7 @@ def population_section(result):
     "warnings": [text], "origin": the file read or "", "correlation": the correlation prior or
     None, "intervals": {parameter: the population distribution's median and 94% range}}.
     """
-    view = result if isinstance(result, PopulationView) else PopulationView(result)
+    view = result if isinstance(result, PopulationView) else PopulationView(result, ci_prob)
     hyper = view.hyper_table().set_index(["parameter", "quantity"])
     per = view.subject_table()
     subjects = {}
@@ -252,20 +263,75 @@ def _other_fits(result, digests, base):
             f"this report with the defaults (run `skinfit population` again to show yours)")
 
 
+#: Rows of a contrast table shown in the page (the largest effects); all are in its CSV
+CONTRAST_ROWS = 20
+
+
+def _effect_size(t):
+    """How far each contrast's effect is from none: |log ratio| for a ratio, else the
+    difference in units of its posterior sd (what sorts a table of ratios and differences)."""
+    ratio = t["effect"] == "ratio"
+    est = t["estimate"].to_numpy(dtype=float)
+    size = np.where(ratio, np.abs(np.log(np.where(ratio, est, 1.0))), 0.0)
+    return np.where(ratio, size, np.abs(t["diff_mean"].to_numpy(dtype=float)) / t["sd"].to_numpy(dtype=float))
+
+
 def contrast_section(table, top=None):
-    """A contrast table (:func:`skinfit.analysis.contrasts.fit_contrasts` / ``level_contrasts``) with the
-    probability of direction ``pd = max(P(A > B), P(A < B))``, sorted by it; the first ``top``
-    rows when given."""
+    """A contrast table (:func:`skinfit.analysis.contrasts.fit_contrasts` / ``level_contrasts``)
+    with the direction of each pair, sorted by the size of the effect (largest first: a ratio's
+    |log|, a difference over its sd); the first ``top`` rows when given. A table of an older
+    skinfit without the effect columns is sorted by its probability of direction."""
     t = table.copy()
     if "parameter" in t.columns:  # first, after the pair
         t.insert(2, "parameter", t.pop("parameter"))
-    t.insert(2, "prob_direction", np.maximum(t["p_greater"], 1 - t["p_greater"]))
+    if "prob_direction" not in t.columns:
+        t.insert(2, "prob_direction", np.maximum(t["p_greater"], 1 - t["p_greater"]))
     t.insert(3, "direction", np.where(t["p_greater"] >= 0.5, "A > B", "A < B"))
-    t = t.sort_values("prob_direction", ascending=False, kind="stable").reset_index(drop=True)
+    if "effect" in t.columns:
+        t = t.iloc[np.argsort(-_effect_size(t), kind="stable")].reset_index(drop=True)
+    else:
+        t = t.sort_values("prob_direction", ascending=False, kind="stable").reset_index(drop=True)
+    t.attrs = dict(table.attrs)
     return t.head(top) if top else t
 
 
-def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved=()):
+def contrast_display(table):
+    """The columns of a sorted contrast table a reader needs: the pair, the parameter, the
+    effect (ratio or difference) with its sd and HDI, the probability of direction and, with
+    a region of practical equivalence, the probability in it (the rest stays in the CSV)."""
+    keep = ["A", "B", "parameter", "effect", "estimate", "sd", "lower", "upper", "direction", "prob_direction"]
+    if "p_rope" in table.columns and table["p_rope"].notna().any():
+        keep.append("p_rope")
+    keep = [c for c in keep if c in table.columns]
+    return table[keep].set_index("A")
+
+
+def contrast_sentence(table):
+    """One sentence on a contrast table: how many comparisons, of how many parameters, how many
+    with a probability of direction above 0.95 (more than one comparison makes some of those
+    by chance: read the effects' sizes, not their count)."""
+    n = len(table)
+    params = table["parameter"].nunique() if "parameter" in table.columns else 1
+    strong = int((table["prob_direction"] > 0.95).sum()) if "prob_direction" in table.columns else 0
+    ci = interval_name(table.attrs.get("ci_prob", CI_PROB))
+    rope = table.attrs.get("rope")
+    return (f"{n} comparison{'s' if n != 1 else ''} of {params} parameter{'s' if params != 1 else ''}: the effect "
+            f"of A against B (the ratio A / B for a positive parameter, else the difference A − B) with its posterior "
+            f"median, sd and {ci}; the probability of direction max(P(A > B), P(A < B)) is above 0.95 in {strong} of "
+            f"them. With {n} comparisons, some such probabilities are high by chance: judge the effects by their size "
+            f"and interval. Sorted by effect size (|log ratio|, or |difference| / sd)"
+            + (f"; region of practical equivalence {rope[0]:g} to {rope[1]:g}, P in it as p_rope" if rope else "")
+            + ".")
+
+
+def card_ropes(fit):
+    """Parameter -> the region of practical equivalence of its contrasts the fit's model card
+    gives (``rope = [low, high]`` on the effect's scale: a ratio for a positive parameter)."""
+    card = tomllib.loads(fit.attrs["model_card"])
+    return {p["name"]: tuple(p["rope"]) for p in card.get("parameters", []) if p.get("rope")}
+
+
+def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved=(), ci_prob=None):
     """Population results and contrasts for the fits of a ``--by`` run or a campaign.
 
     ``fits``: {key: Fit}. For each model with at least ``min_fits`` fits on groups of datasets
@@ -288,8 +354,11 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
     (:func:`skinfit.analysis.population.population.population`'s ``cache``), so a report of the same fits does
     not sample it again.
 
+    ``ci_prob``: probability of the contrasts' highest-density intervals (default 0.94).
+
     Returns ``(populations {model id: result}, contrasts {title: DataFrame})``.
     """
+    prob = CI_PROB if ci_prob is None else ci_prob
     by_model = {}
     for key, f in fits.items():
         base = re.sub(r"\[.*\]$", "", f.dataset_id)
@@ -334,21 +403,27 @@ def group_analyses(fits, *, seed=0, min_fits=3, echo=None, cache_dir=None, saved
                 if echo:
                     echo(f"skinfit report: no population for {model_id} on {base}: {exc}")
         rows = []
+        ropes = card_ropes(next(iter(group.values())))
         for name in names:
             try:
-                rows.append(fit_contrasts(group, name, rng=seed).assign(parameter=name))
+                rows.append(fit_contrasts(group, name, rng=seed, prob=prob, rope=ropes.get(base_name(name)))
+                            .assign(parameter=name))
             except (InputError, ValueError) as exc:
                 if echo:
                     echo(f"skinfit report: no contrasts of {name} for {model_id}: {exc}")
         if rows:
             table = pd.concat(rows, ignore_index=True)
+            table.attrs.update(ci_prob=prob, ci_kind="hdi")
             table.attrs[NOT_CONVERGED_ATTR] = [label for label, f in group.items() if not f.converged]
             contrasts[f"{model_id} on {base}: between subjects"] = table
     for (_key, f), label in zip(fits.items(), run_labels(fits.values())):  # two split fits: each its own table
         split = {s["base"] for s in f.attr("slots") if s["level"] is not None}
-        rows = [level_contrasts(f, name).assign(parameter=name) for name in sorted(split)]
+        ropes = card_ropes(f)
+        rows = [level_contrasts(f, name, prob=prob, rope=ropes.get(name)).assign(parameter=name)
+                for name in sorted(split)]
         if rows:
             table = pd.concat(rows, ignore_index=True)
+            table.attrs.update(ci_prob=prob, ci_kind="hdi")
             table.attrs[NOT_CONVERGED_ATTR] = [] if f.converged else [f"{label} on {f.dataset_id}"]
             contrasts[f"{label} on {f.dataset_id}: between conditions"] = table
     return populations, contrasts
@@ -367,7 +442,25 @@ def population_for(population, model_id, parameter):
     return population.get(parameter)
 
 
-def across_fits(items, figdir, population, populations, out_dir, jobs):
+def shown_population_rows(hyper):
+    """Which rows of a population's hyper table (index parameter, column ``quantity``) the page
+    shows: a derived row (mean, median, population sd) equal to the sampled ``mu`` or ``tau``
+    row of its parameter in estimate and interval (a normal family: mean = median = mu, sd =
+    tau) is left to the CSV."""
+    keep = np.ones(len(hyper), dtype=bool)
+    for i, (name, row) in enumerate(zip(hyper.index, hyper.itertuples(index=False))):
+        twin = {"mean": "mu", "median": "mu", "sd": "tau"}.get(row.quantity)
+        if twin is None:
+            continue
+        other = hyper[(hyper.index == name) & (hyper["quantity"] == twin)]
+        cols = ["estimate", "lower", "upper"]
+        if len(other) and np.allclose(other[cols].to_numpy(dtype=float)[0], [getattr(row, c) for c in cols],
+                                      rtol=1e-9, atol=0):
+            keep[i] = False
+    return keep
+
+
+def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=CI_PROB):
     """Per model with several fits (subjects, conditions): a table and a forest plot of each
     parameter across the fits, labelled by subject as written in the data, and the model's
     population result when given. The forest plots are appended to ``jobs`` (drawn with the
@@ -381,7 +474,8 @@ def across_fits(items, figdir, population, populations, out_dir, jobs):
         if len(group) < 2:
             continue
         safe = unique_name(file_part(model_id), taken)
-        subj = subjects_section(dict(group))
+        subj = subjects_section(dict(group), ci_prob)
+        display, si_units = display_unit_map(group[0][1]), parameter_units(group[0][1])
         labelled = {subj["labels"][k]: f for k, f in group}
         if len(labelled) < len(group):  # the same subject label twice: keep the unique keys
             labelled = dict(group)
@@ -389,14 +483,19 @@ def across_fits(items, figdir, population, populations, out_dir, jobs):
         for pname, table in subj["tables"].items():
             stem = f"subjects_{safe}_{file_part(pname)}"
             table.to_csv(out_dir / f"{stem}.csv")
-            tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": cells(table, "subject")})
+            unit = display.get(base_name(pname))
+            shown = table if unit is None else table.assign(**{c: table[c] / to_si(unit) for c in table.columns
+                                                                if c == "sd" or is_estimate_column(c)})
+            tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": cells(shown, "subject"),
+                           "unit": unit_cell(unit or si_units.get(base_name(pname), ""))})
         pop_result = populations.get(model_id)
-        pop_info = population_section(pop_result) if pop_result is not None else None
+        pop_info = population_section(pop_result, ci_prob) if pop_result is not None else None
         if pop_info is not None:
             pop_info["hyper"].to_csv(out_dir / f"population_{safe}.csv")
             if pop_info["effects"] is not None:
                 pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
             hyper = pop_info["hyper"].reset_index().set_index("parameter")
+            hyper = hyper[shown_population_rows(hyper)]  # rows equal to another: in the CSV alone
             derived = hyper["quantity"].isin(DERIVED)  # computed from mu and tau
             pop_tables = {"hyper": cells(hyper, "parameter",
                                          not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),

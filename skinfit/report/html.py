@@ -33,6 +33,7 @@ from skinfit.inference.checkpoint import CheckpointLock
 from skinfit.io.labels import derived_units, parameter_units
 from skinfit.io.paths import package_version
 from skinfit.io.references import cite_long
+from skinfit.plots.contrast_matrix import plot_contrast_matrix
 from skinfit.report.checks import (
     checked_text,
     comparison_issues,
@@ -42,14 +43,22 @@ from skinfit.report.checks import (
     section_issues,
 )
 from skinfit.report.design import design_section_html
-from skinfit.report.figures import fit_figure_jobs, render_figures
-from skinfit.report.groups import across_fits, contrast_section, group_analyses
+from skinfit.report.figures import draw_figure, fit_figure_jobs, render_figures
+from skinfit.report.groups import (
+    CONTRAST_ROWS,
+    across_fits,
+    contrast_display,
+    contrast_section,
+    contrast_sentence,
+    group_analyses,
+)
 from skinfit.report.runs import collect_runs, comparison_tables, saved_populations
 from skinfit.report.tables import (
     base_name,
     break_at_underscores,
     cells,
     defang,
+    display_units,
     file_part,
     level_names,
     markdown,
@@ -58,9 +67,13 @@ from skinfit.report.tables import (
     unique_name,
 )
 from skinfit.results.fit import as_fit, load_fit
+from skinfit.results.intervals import CI_PROB, check_ci, interval_name
 from skinfit.results.run_labels import run_labels
 
 __all__ = ["write_report", "cli_report", "claim_report_folder", "REPORT_MARKER"]
+
+#: Subjects (or levels) of a parameter from which its contrasts are also drawn as a matrix
+MATRIX_LABELS = 6
 
 #: A file in each report folder: the folder is the report's, to rewrite on the next report into it.
 REPORT_MARKER = ".skinfit-report"
@@ -114,7 +127,7 @@ def _as_fits(fits):
 
 
 def write_report(fits, out_dir, *, title=None, comparison=None, population=None, populations=None,
-                 contrasts=None, designs=(), analyses=None, notes=None):
+                 contrasts=None, designs=(), analyses=None, notes=None, ci_prob=None):
     """Write a self-contained static report of ``fits`` into ``out_dir``.
 
     Parameters
@@ -146,6 +159,10 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         any of ``comparison``, ``population``, ``populations``, ``contrasts`` and ``notes``, used
         as those arguments: a caller's comparisons and populations computed while the figures
         are drawn (``skinfit demo``).
+    ci_prob : float, optional
+        Probability of every interval of the report's tables, highest-density intervals
+        (default :data:`skinfit.results.intervals.CI_PROB`, 94%); named in each table's header
+        and recorded at the top of the page.
 
     Returns
     -------
@@ -163,13 +180,13 @@ def write_report(fits, out_dir, *, title=None, comparison=None, population=None,
         before, start = {p.name for p in out.iterdir()}, time.time_ns()
         index = _write_contents(items, out, figdir, title=title, comparison=comparison, population=population,
                                 populations=populations, contrasts=contrasts, designs=designs, analyses=analyses,
-                                notes=notes)
+                                notes=notes, ci_prob=CI_PROB if ci_prob is None else check_ci(ci_prob, "write_report"))
         _record_outputs(out, before, start)
     return index
 
 
 def _write_contents(items, out, figdir, *, title, comparison, population, populations, contrasts, designs,
-                    analyses=None, notes=None):
+                    analyses=None, notes=None, ci_prob=CI_PROB):
     """The report's files (see :func:`write_report`), in a folder already claimed and locked.
     The fits' figures are drawn while the sections, ``analyses`` and the figures across fits
     are computed (:func:`render_figures`' ``meanwhile``)."""
@@ -196,13 +213,17 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
                 raise TypeError(f"write_report: analyses() returned {', '.join(sorted(unknown))}")
             given.update(found)
         for (key, fit), section_jobs in zip(items, fit_jobs):
-            summary = fit.summary()
-            diag, issues = fit_diagnostics(fit, summary)
+            summary = fit.summary(ci_prob)
+            diag, issues = fit_diagnostics(fit, fit.summary())
             summary.to_csv(out / f"{key}_summary.csv")
             diag.to_csv(out / f"{key}_diagnostics.csv")
             units = parameter_units(fit)
             shown = summary.drop(columns="unit", errors="ignore")
             shown.insert(0, "unit", [units.get(base_name(n), "") for n in shown.index])
+            numbers = shown.select_dtypes("number")
+            shown = shown[numbers.notna().any(axis=1).to_numpy()]  # a row of n/a only: in the CSV alone
+            shown = display_units(shown, fit)
+            shown["note"] = shown["note"].str.replace(r"^derived \[.*\]$", "derived", regex=True)  # unit: its column
             derived = np.isin([base_name(n) for n in shown.index], list(derived_units(fit)))  # no MAP, tau, prior
             named = level_names(fit)
             shown.index = [named.get(n, n) for n in shown.index]
@@ -215,7 +236,8 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
                                               not_applicable(shown, ["map", "tau", "contraction"], derived)),
                              "diagnostics": cells(diag, "check"), "figures": [job["entry"] for job in section_jobs],
                              "csv": [f"{key}_summary.csv", f"{key}_diagnostics.csv"]})
-        across.extend(across_fits(items, figdir, given["population"], given["populations"] or {}, out, more))
+        across.extend(across_fits(items, figdir, given["population"], given["populations"] or {}, out, more,
+                                  ci_prob=ci_prob))
         tables = given["comparison"]
         tables = tables if isinstance(tables, dict) else ({"": tables} if tables is not None else {})
         for name, table in tables.items():
@@ -257,13 +279,30 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     contrast_tables = []
     for name, table in (contrasts or {}).items():
         stem = unique_name("contrasts_" + file_part(name).strip("_"), stems)
-        shown = contrast_section(table)
-        shown.to_csv(out / f"{stem}.csv", index=False)
-        top = shown.head(20).set_index("A")
-        contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(shown),
+        full = contrast_section(table)
+        full.to_csv(out / f"{stem}.csv", index=False)
+        top = contrast_display(full.head(CONTRAST_ROWS))
+        figures = []
+        order = list(dict.fromkeys([*table["A"], *table["B"]]))  # subjects or levels as the table lists them
+        for pname, rows in (full.groupby("parameter", sort=False) if "parameter" in full.columns else ()):
+            if len(set(rows["A"]) | set(rows["B"])) < MATRIX_LABELS:  # a few pairs: the table says it all
+                continue
+            path = figdir / f"{stem}_{file_part(str(pname))}.png"
+            error = draw_figure(lambda rows=rows, pname=pname, order=order:
+                                plot_contrast_matrix(rows, pname, order=order), path)
+            if error:
+                issues_all.append({"status": "WARN", "anchor": f"contrasts-{len(contrast_tables) + 1}",
+                                   "where": f"contrasts: {name}", "text": error})
+            else:
+                figures.append({"file": f"figures/{path.name}", "alt": f"matrix of the contrasts of {pname}",
+                                "caption": f"{pname}: the effect of each row's subject against each column's "
+                                           f"({len(rows)} pairs); dots: probability of direction above 0.95"})
+        contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(full), "shown": len(top),
+                                "figures": figures,
+                                "ci": interval_name(table.attrs.get("ci_prob", ci_prob)),
+                                "rope": table.attrs.get("rope"), "sentence": contrast_sentence(full),
                                 "id": f"contrasts-{len(contrast_tables) + 1}", "issues": contrast_issues(table),
-                                "table": cells(top, "A", not_applicable(  # NaN where B's draws change sign
-                                    top, ["ratio_median", "ratio_lower", "ratio_upper"]))})
+                                "table": cells(top, "A")})
 
     design_sections = []
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
@@ -273,6 +312,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     issues_all.sort(key=lambda i: i["status"] != "FAIL")  # failures first, then warnings (stable)
     n_fail = sum(i["status"] == "FAIL" for i in issues_all)
     context = {"title": title or "skinfit report", "version": __version__, "sections": sections,
+               "ci": interval_name(ci_prob), "ci_prob": ci_prob,
                "issues": issues_all, "n_fail": n_fail, "n_warn": len(issues_all) - n_fail,
                "checked": checked_text(sections, across, comparisons, contrast_tables, design_sections),
                "comparisons": comparisons, "across": across, "contrasts": contrast_tables,
@@ -352,7 +392,9 @@ def _record_outputs(out, before, start):
 def _summary_md(ctx):
     lines = [f"# {ctx['title']}", "",
              f"Written by skinfit {ctx['version']} from {ctx['n_fits']} saved fit(s); "
-             f"{ctx['n_converged']} converged. Figures are in `figures/`; tables also as CSV.", "",
+             f"{ctx['n_converged']} converged. Figures are in `figures/`; tables also as CSV (every digit). "
+             f"Every interval is a {ctx['ci']} (highest-density interval); numbers are rounded to the second "
+             "significant digit of their posterior sd.", "",
              "## Diagnostics", ""]
     if ctx["issues"]:
         lines += [f"{ctx['n_fail']} failure{'s' if ctx['n_fail'] != 1 else ''} and {ctx['n_warn']} "
@@ -370,18 +412,21 @@ def _summary_md(ctx):
     for a in ctx["across"]:
         lines += ["", f"## {a['model_id']} across fits: {', '.join(a['fits'])}", ""]
         for tb in a["tables"]:
-            lines += ["", f"### {tb['parameter']} per subject", "", markdown(tb["table"])]
+            unit = f" [{tb['unit']}]" if tb.get("unit") not in (None, "", "1") else ""
+            lines += ["", f"### {tb['parameter']} per subject{unit}", "", markdown(tb["table"])]
         if a["population"]:
             lines += ["", "### Population", "", markdown(a["population"]["hyper"])]
             for tb in a["population"]["subjects"]:
                 lines += ["", f"#### {tb['parameter']}: separate and shrunk", "", markdown(tb["table"])]
         lines += [f"![{f['alt']}]({f['file']})" for f in a["figures"]]
     for c in ctx["contrasts"]:
-        lines += ["", f"## Contrasts: {c['name']}", "", markdown(c["table"]), "", f"CSV: `{c['csv']}`"]
+        lines += ["", f"## Contrasts: {c['name']}", "", c["sentence"], ""]
+        lines += [f"![{f['alt']}]({f['file']})" for f in c["figures"]]
+        lines += ["", markdown(c["table"]), "", f"CSV: `{c['csv']}` (all {c['n']} comparisons)"]
     for s in ctx["sections"]:
         lines += ["", f"## {s['where']}", "", f"Produced by {s['prov_line']}.", "",
                   f"Model: {s['prov']['model_title']} ({s['prov']['model_source']}).", "",
-                  "### Posterior summary (SI units)", "", markdown(s["summary"]), "",
+                  f"### Posterior summary (mean, sd and {ctx['ci']})", "", markdown(s["summary"]), "",
                   "### Diagnostics", "", markdown(s["diagnostics"]), "", "### Figures", ""]
         lines += [f"![{f['alt']}]({f['file']})" for f in s["figures"]]
         lines += ["", "CSV: " + ", ".join(f"`{c}`" for c in s["csv"])]
@@ -405,11 +450,11 @@ def cli_report(args):
             notes.append(("analyses across fits", message.removeprefix("skinfit report: ")))
 
         populations, contrasts = group_analyses(dict(items), echo=echo, cache_dir=Path(args.out) / ".cache",
-                                                saved=saved_populations(args.runs))
+                                                saved=saved_populations(args.runs), ci_prob=getattr(args, "ci", None))
         return {"comparison": comparison_tables(items, echo), "populations": populations, "contrasts": contrasts,
                 "notes": notes}
 
-    index = write_report(dict(items), args.out, designs=designs, analyses=analyses)
+    index = write_report(dict(items), args.out, designs=designs, analyses=analyses, ci_prob=getattr(args, "ci", None))
     if getattr(args, "json", False):
         print(json.dumps({"report": str(index), "fits": [name for name, _ in items]}, indent=2))
         return 0

@@ -6,13 +6,18 @@ the HTML page and in ``summary.md`` (:func:`markdown`); its CSV is written by pa
 
 import math
 import re
+import tomllib
 
 import numpy as np
 import pandas as pd
 from markupsafe import Markup, escape
 
+from skinfit.io.units import pretty_unit, to_si
+from skinfit.results.summary import format_numbers, is_estimate_column
+
 __all__ = ["file_part", "unique_name", "cell_text", "cells", "not_applicable", "markdown", "level_names",
-           "base_name", "defang", "break_at_underscores", "ranking_note"]
+           "base_name", "defang", "break_at_underscores", "ranking_note", "display_unit_map", "display_units",
+           "unit_cell"]
 
 
 def file_part(text):
@@ -33,26 +38,33 @@ def unique_name(base, taken):
 
 
 def cell_text(value, na=False):
-    """Table cell text: 6 significant digits for floats (enough to check against the CSV); a NaN
-    is ``n/a`` in a cell that has no value by construction (``na``), else ``nan``."""
+    """Table cell text of a value :func:`skinfit.results.summary.format_numbers` left as it was
+    (a float only where no table rounds it: 4 significant digits); a NaN is ``n/a`` in a cell
+    that has no value by construction (``na``), else ``nan``."""
     if isinstance(value, (bool, np.bool_)):
         return "yes" if value else "no"
     if isinstance(value, (int, np.integer)):
         return str(int(value))
     if isinstance(value, (float, np.floating)):
-        return ("n/a" if na else "nan") if math.isnan(value) else f"{value:.6g}"
-    return "" if value is None else str(value)
+        return ("n/a" if na else "nan") if math.isnan(value) else f"{value:.4g}"
+    if na and value == "nan":
+        return "n/a"
+    return "" if value is None else value if isinstance(value, Markup) else str(value)
 
 
-def cells(df, index_name, na=None):
+def cells(df, index_name, na=None, sd=None):
     """A DataFrame as {columns, rows, text} of formatted cells, the index as first column;
-    ``text[k]`` is True for a column of words (left-aligned and wrapped in the page). ``na``:
-    a boolean array (rows, columns) of the cells that have no value by construction (see
-    :func:`not_applicable`), shown as ``n/a`` rather than ``nan`` (a number not computed)."""
+    ``text[k]`` is True for a column of words (left-aligned and wrapped in the page). Numbers
+    at the precision their uncertainty allows (:func:`skinfit.results.summary.format_numbers`;
+    ``sd``: each row's posterior sd when the table has no ``sd`` column); the CSV beside the
+    table keeps every digit. ``na``: a boolean array (rows, columns) of the cells that have no
+    value by construction (see :func:`not_applicable`), shown as ``n/a`` rather than ``nan``
+    (a number not computed)."""
     na = np.zeros(df.shape, dtype=bool) if na is None else np.asarray(na, dtype=bool)
+    shown = format_numbers(df, sd)
     return {"columns": [index_name] + [str(c) for c in df.columns],
             "rows": [[cell_text(i)] + [cell_text(v, a) for v, a in zip(row, flags)]
-                     for i, row, flags in zip(df.index, df.itertuples(index=False), na)],
+                     for i, row, flags in zip(df.index, shown.itertuples(index=False), na)],
             "text": [True] + [not (pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c]))
                               for c in df.columns]}
 
@@ -140,3 +152,35 @@ def ranking_note(table):
             "whatever the prior. Where they disagree, the winner by evidence is favoured as a whole-model "
             "explanation under these priors, the winner by LOO as a predictor of new rows like these; "
             "check the standard errors before reading either difference.")
+
+
+def display_unit_map(fit):
+    """Parameter name -> the unit its model card asks tables and figures to show it in
+    (``display_unit``: kPa for a modulus, µm for a gap), for the parameters that name one."""
+    card = tomllib.loads(fit.attrs["model_card"])
+    return {p["name"]: p["display_unit"] for p in card.get("parameters", []) if p.get("display_unit")}
+
+
+def unit_cell(unit):
+    """A unit as a table cell: as a physicist writes it (``N·s/m``, ``m²/N<sup>m</sup>``),
+    markup for the page (:func:`skinfit.io.units.pretty_unit`)."""
+    return Markup(pretty_unit(unit, html=True)) if isinstance(unit, str) and unit else unit
+
+
+def display_units(shown, fit):
+    """Summary rows ``shown`` (a ``unit`` column, values in SI) with each parameter that its
+    model card gives a ``display_unit`` converted to it (its estimates, interval ends and sd;
+    for display only: the CSV stays in SI), and every unit written by :func:`unit_cell`."""
+    display = display_unit_map(fit)
+    out = shown.copy()
+    scaled = [c for c in out.columns if c == "sd" or is_estimate_column(c)]
+    out[scaled] = out[scaled].astype(float)
+    units = list(out["unit"])
+    for i, name in enumerate(out.index):
+        unit = display.get(base_name(str(name)))
+        if unit:
+            for c in scaled:
+                out.iloc[i, out.columns.get_loc(c)] /= to_si(unit)
+            units[i] = unit
+    out["unit"] = [unit_cell(u) for u in units]
+    return out

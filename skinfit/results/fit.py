@@ -31,11 +31,13 @@ from skinfit.io.models import parse_model_text
 from skinfit.io.priors import PriorSet
 from skinfit.io.provenance import input_lines, inputs_of
 from skinfit.posterior import Posterior
+from skinfit.results.intervals import CI_KIND, CI_PROB, check_ci, interval_name
 from skinfit.results.store import fit_file, read_tree, write_tree
 from skinfit.results.summary import (
     SUMMARY_ATTR,
     SUMMARY_FORMAT,
     compute_summary,
+    format_numbers,
     misfit_line,
     priors_from_attrs,
     summary_from_attr,
@@ -197,8 +199,13 @@ class Fit:
         return self._posterior
 
     # ---- tables -------------------------------------------------------------------------
-    def summary(self) -> pd.DataFrame:
-        """Per parameter: its SI unit, mean, sd, 3%/97% HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
+    def summary(self, ci_prob: float | None = None) -> pd.DataFrame:
+        """Per parameter: its SI unit, mean, sd, HDI, R-hat, bulk/tail ESS, MAP, tau, contraction.
+
+        The interval is the highest-density interval at ``ci_prob`` (default
+        :data:`skinfit.results.intervals.CI_PROB`, 94%: columns ``hdi_3%``, ``hdi_97%``; at 0.9
+        ``hdi_5%``, ``hdi_95%``), as ``az.summary(fit.idata, ci_kind="hdi", ci_prob=ci_prob)``
+        gives it; the table's ``attrs`` record ``ci_prob`` and ``ci_kind``.
 
         ``contraction`` is 1 - var_posterior / var_prior, in the sampling coordinate (log for
         positive parameters): near 1 the data determined the parameter; below 0.5 the
@@ -212,6 +219,11 @@ class Fit:
         computing it again, nor importing arviz_stats and scipy.stats; after any edit of those
         it is computed afresh.
         """
+        ci_prob = CI_PROB if ci_prob is None else check_ci(ci_prob, "Fit.summary")
+        if ci_prob != CI_PROB:  # another interval: computed each time, never stored
+            table = compute_summary(self, ci_prob)
+            table.attrs.update(warnings=self.warnings, notes=self.notes)
+            return table
         key = self._summary_key()
         if self._summary is not None and self._summary[0] == key:
             return self._summary[1].copy()
@@ -221,6 +233,7 @@ class Fit:
         # guard rails and misfit (skinfit.inference.guardrails, skinfit.inference.misfit)
         table.attrs["warnings"] = self.warnings
         table.attrs["notes"] = self.notes  # information, not failures (skinfit.inference.guardrails)
+        table.attrs.update(ci_prob=CI_PROB, ci_kind=CI_KIND)
         self._summary = (key, table)
         return table.copy()
 
@@ -306,9 +319,11 @@ class Fit:
                  f"outside the physical support {c['outside_support']}"
                  + (f" ({self.attrs.get('support_condition')})" if c["outside_support"] else ""),
                  ""]
-        with pd.option_context("display.width", 200, "display.max_columns", 20,
-                               "display.float_format", "{:.4g}".format):
-            lines.append((self.summary() if summary is None else summary).to_string())
+        table = self.summary() if summary is None else summary
+        lines.append(f"intervals: {interval_name(table.attrs.get('ci_prob', CI_PROB))} (highest-density); "
+                     "numbers to the precision their posterior sd allows (summary.csv has every digit)")
+        with pd.option_context("display.width", 200, "display.max_columns", 20):
+            lines.append(format_numbers(table).to_string())
         return "\n".join(lines)
 
     def save(self, path: str | os.PathLike) -> Path:

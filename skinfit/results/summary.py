@@ -13,10 +13,13 @@ import warnings
 import numpy as np
 import pandas as pd
 
+from skinfit.io.labels import round_to_sd
 from skinfit.io.priors import parse_prior
+from skinfit.results.intervals import CI_KIND, CI_PROB, check_ci, interval_columns
 
 __all__ = ["SUMMARY_ATTR", "SUMMARY_FORMAT", "SUMMARY_COLUMNS", "compute_summary", "summary_to_attr",
-           "summary_from_attr", "slot_values", "priors_from_attrs", "misfit_line", "wall_time_text"]
+           "summary_from_attr", "slot_values", "priors_from_attrs", "misfit_line", "wall_time_text",
+           "summary_columns", "format_numbers", "ESTIMATE_COLUMNS", "is_estimate_column"]
 
 #: Root attribute holding a fit's summary table (:meth:`skinfit.Fit.summary`), and the table's
 #: format: raise it when the table's columns or their computation change, so older stored tables
@@ -27,8 +30,16 @@ SUMMARY_COLUMNS = ("unit", "mean", "sd", "hdi_3%", "hdi_97%", "r_hat", "ess_bulk
                    "contraction", "note")
 
 
-def _arviz_summary(tree, **kwargs):
-    """arviz_stats' summary of ``tree`` with 94% HDIs, labelled ``hdi_3%`` and ``hdi_97%``, and
+def summary_columns(ci_prob=CI_PROB):
+    """The columns of a summary table whose intervals are HDIs at ``ci_prob``
+    (:data:`SUMMARY_COLUMNS` at the default 0.94)."""
+    lower, upper = interval_columns(ci_prob)
+    return tuple({"hdi_3%": lower, "hdi_97%": upper}.get(c, c) for c in SUMMARY_COLUMNS)
+
+
+def _arviz_summary(tree, ci_prob=CI_PROB, **kwargs):
+    """arviz_stats' summary of ``tree`` with HDIs at ``ci_prob``, labelled by
+    :func:`skinfit.results.intervals.interval_columns` (``hdi_3%``, ``hdi_97%`` at 0.94), and
     the rows named as skinfit names the sampled slots (``alpha[75]``)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -36,17 +47,20 @@ def _arviz_summary(tree, **kwargs):
         # is needed only when a table is computed, not by a report that reads the stored ones
         from arviz_stats import summary
 
-        table = summary(tree, ci_kind="hdi", ci_prob=0.94, round_to="none", **kwargs)
-    table = table.rename(columns={"hdi94_lb": "hdi_3%", "hdi94_ub": "hdi_97%"})
+        table = summary(tree, ci_kind=CI_KIND, ci_prob=ci_prob, round_to="none", **kwargs)
+    lower, upper = interval_columns(ci_prob)
+    table = table.rename(columns={table.columns[2]: lower, table.columns[3]: upper})
     table.index = [label.replace("'", "") for label in table.index]
     return table
 
 
-def compute_summary(fit):
-    """The summary table of :class:`skinfit.Fit` ``fit`` (its columns :data:`SUMMARY_COLUMNS`;
-    see :meth:`skinfit.Fit.summary`), from its tree as held (never its pointwise groups)."""
+def compute_summary(fit, ci_prob=CI_PROB):
+    """The summary table of :class:`skinfit.Fit` ``fit`` (its columns :func:`summary_columns`;
+    see :meth:`skinfit.Fit.summary`), from its tree as held (never its pointwise groups), with
+    HDIs at ``ci_prob``."""
+    ci_prob = check_ci(ci_prob, "summary")
     tree = fit.partial_tree
-    table = _arviz_summary(tree, var_names=list(tree["posterior"].data_vars))
+    table = _arviz_summary(tree, ci_prob, var_names=list(tree["posterior"].data_vars))
     sampler = fit.attr("sampler")
     post_ds = tree["posterior"].to_dataset()
     priors = priors_from_attrs(fit.attrs)
@@ -74,16 +88,18 @@ def compute_summary(fit):
     table["tau"] = [sampler["tau"][n] for n in table.index]
     table["contraction"] = contraction
     table["note"] = notes
-    table = pd.concat([table, _derived_summary(tree)])
+    table = pd.concat([table, _derived_summary(tree, ci_prob)])
     table["unit"] = [_unit(tree, n) for n in table.index]
-    return table[list(SUMMARY_COLUMNS)]
+    table = table[list(summary_columns(ci_prob))]
+    table.attrs.update(ci_prob=ci_prob, ci_kind=CI_KIND)
+    return table
 
 
-def _derived_summary(tree):
+def _derived_summary(tree, ci_prob):
     """Rows of the summary for the ``derived`` group (no MAP, tau or contraction)."""
     if "derived" not in tree.children:
         return None
-    table = _arviz_summary(tree, group="derived")
+    table = _arviz_summary(tree, ci_prob, group="derived")
     units = json.loads(tree.attrs["derived"])["quantities"]
     table["note"] = [f"derived [{units[i.split('[')[0]]}]" for i in table.index]
     return table
@@ -97,6 +113,60 @@ def _unit(tree, name):
         if group in tree.children and base in tree[group].data_vars:
             return tree[group][base].attrs.get("units", "")
     return ""
+
+
+#: Columns of skinfit's tables that are estimates of a quantity, in its unit: shown at the
+#: precision its posterior sd allows (:func:`format_numbers`); interval ends are found by name
+ESTIMATE_COLUMNS = ("mean", "median", "map", "estimate", "lower", "upper", "separate", "shrunk", "effect")
+
+
+def is_estimate_column(column):
+    """True for a column of estimates or interval ends of a quantity, in its unit (see
+    :data:`ESTIMATE_COLUMNS`; ``hdi_3%``, ``diff_lower``, ``shrunk_upper``...)."""
+    c = str(column)
+    return (c in ESTIMATE_COLUMNS or c.startswith(("hdi_", "eti_", "effect_", "separate_", "shrunk_", "diff_",
+                                                   "ratio_", "new_subject_")))
+
+
+def format_numbers(table, sd=None):
+    """The numbers of ``table`` (a DataFrame) as a reader needs them, as text (other cells as
+    they are): estimates and interval ends (:data:`ESTIMATE_COLUMNS`, ``hdi_*``...) rounded to
+    the decimal place of the second significant digit of their row's posterior sd
+    (:func:`skinfit.io.labels.round_to_sd`), the sd to two significant digits; a column ``X``
+    beside a column ``X_se`` (``log_z``, ``log_z_se``) to its standard error the same way;
+    R-hat and contraction to two decimals, probabilities to two decimals (``>0.99``, ``<0.01``
+    beyond), effective sample sizes as integers, other numbers to four significant digits.
+    ``sd``: the sd of each row (default: the table's ``sd`` column; without one, estimates get
+    three significant digits). The CSV written beside a table keeps every digit."""
+    sd = (table["sd"] if "sd" in table.columns else None) if sd is None else sd
+    sd = np.full(len(table), np.nan) if sd is None else np.asarray(sd, dtype=float)
+    names = [str(c) for c in table.columns]
+    out = table.astype(object).copy()
+    for j, c in enumerate(names):
+        se = table.iloc[:, names.index(f"{c}_se")].to_numpy() if f"{c}_se" in names else None
+        for i, value in enumerate(table.iloc[:, j]):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (float, np.floating)):
+                continue
+            if np.isnan(value):
+                text = "nan"
+            elif se is not None:
+                text = round_to_sd(value, se[i])
+            elif c.endswith("_se"):
+                text = round_to_sd(value, value)
+            elif c == "sd" or is_estimate_column(c):
+                text = round_to_sd(value, sd[i])
+            elif c.startswith(("p_", "prob_")):
+                text = ">0.99" if value > 0.995 else "<0.01" if value < 0.005 else f"{value:.2f}"
+            elif c in ("r_hat", "contraction"):
+                text = f"{value:.2f}"
+            elif c == "tau":  # autocorrelation time, in steps
+                text = f"{value:.2g}" if value < 10 else f"{value:.0f}"
+            elif c.startswith("ess") or 1e3 <= abs(value) < 1e9:
+                text = f"{value:.0f}"
+            else:
+                text = f"{value:.4g}"
+            out.iat[i, j] = text
+    return out
 
 
 def summary_to_attr(table, key):

@@ -51,6 +51,7 @@ from skinfit.analysis.population.reweight import reweight
 from skinfit.errors import InputError
 from skinfit.io.arguments import as_generator
 from skinfit.results.fit import Fit
+from skinfit.results.intervals import CI_PROB
 from skinfit.results.summary import priors_from_attrs, slot_values
 
 __all__ = ["population", "population_tables", "BURN"]
@@ -105,7 +106,7 @@ def _model_parameter_names(fit):
     return {p["name"] for p in tomllib.loads(fit.attrs["model_card"]).get("parameters", [])}
 
 
-def population_tables(result, prob=0.95):
+def population_tables(result, prob=CI_PROB):
     """Tables for a report: ``hyper`` (population mean / sd / median with intervals, family,
     R-hat, ESS), ``subjects`` (separate vs shrunk per subject and parameter), ``effects``
     (conditions as effects: probabilities and intervals), ``hyperpriors`` and ``warnings``."""

@@ -20,6 +20,7 @@ from skinfit.errors import InputError
 from skinfit.inference.checkpoint import replace_atomic
 from skinfit.io import integrity
 from skinfit.io.arguments import as_generator
+from skinfit.results.intervals import CI_PROB, hdi
 
 __all__ = ["PopulationWarning", "DERIVED", "WEAK_DATA", "PopulationResult", "load_population"]
 
@@ -131,11 +132,12 @@ class PopulationResult:
         p = len(self.parameters)
         return [(j, k) for j in range(p) for k in range(j + 1, p)]
 
-    def summary(self, prob=0.95):
+    def summary(self, prob=CI_PROB):
         """Per parameter: population mean, sd and median (natural units), ``mu`` and ``sd`` in
-        the population coordinate, correlations: median and central ``prob`` interval, with the
-        family, R-hat and ESS of ``mu`` / ``sd``."""
-        a = 0.5 * (1 - check_prob(prob, "summary"))
+        the population coordinate, correlations: posterior median, sd and highest-density
+        interval at ``prob`` (:mod:`skinfit.results.intervals`), with the family, R-hat and ESS
+        of ``mu`` / ``sd``."""
+        check_prob(prob, "summary")
         rows = []
         draws = self.population_draws()
         diag = self.diagnostics().set_index(["parameter", "quantity"])
@@ -143,41 +145,44 @@ class PopulationResult:
             coord = self.coordinates[j]
             items = [*((q, draws[q], "natural") for q in DERIVED), ("mu", self.mu, coord), ("tau", self.sd, coord)]
             for qty, x, c in items:
-                lo, med, hi = np.quantile(x[:, :, j], [a, 0.5, 1 - a])
+                lo, med, hi = _interval(x[:, :, j], prob)
                 d = diag.loc[(name, "sd" if qty == "tau" else "mu")] if qty in ("mu", "tau") else None
                 rows.append({"parameter": name, "family": self.families[j], "quantity": qty, "estimate": med,
-                             "lower": lo, "upper": hi, "coordinate": c,
+                             "sd": float(np.std(x[:, :, j])), "lower": lo, "upper": hi, "coordinate": c,
                              "r_hat": np.nan if d is None else d["r_hat"],
                              "ess_bulk": np.nan if d is None else d["ess_bulk"],
                              "ess_tail": np.nan if d is None else d["ess_tail"]})
         if self.corr is not None:
             for j, k in self._pairs():
-                lo, med, hi = np.quantile(self.corr[:, :, j, k], [a, 0.5, 1 - a])
+                lo, med, hi = _interval(self.corr[:, :, j, k], prob)
                 key = f"{self.parameters[j]},{self.parameters[k]}"
                 d = diag.loc[(key, "corr")]
-                rows.append({"parameter": key, "family": "", "quantity": "corr", "estimate": med, "lower": lo,
+                rows.append({"parameter": key, "family": "", "quantity": "corr", "estimate": med,
+                             "sd": float(np.std(self.corr[:, :, j, k])), "lower": lo,
                              "upper": hi, "coordinate": "population", "r_hat": d["r_hat"],
                              "ess_bulk": d["ess_bulk"], "ess_tail": d["ess_tail"]})
         return pd.DataFrame(rows)
 
-    def subject_summary(self, prob=0.95):
-        """Per subject and parameter: separate-fit and shrunk posterior median and interval, and
-        the contraction of the subject's own fit (1 - var posterior / var prior, sampling
-        coordinate: near 0 the subject's data barely moved its prior)."""
-        a = 0.5 * (1 - check_prob(prob, "subject_summary"))
+    def subject_summary(self, prob=CI_PROB):
+        """Per subject and parameter: separate-fit and shrunk posterior median, sd and
+        highest-density interval at ``prob``, and the contraction of the subject's own fit
+        (1 - var posterior / var prior, sampling coordinate: near 0 the subject's data barely
+        moved its prior)."""
+        check_prob(prob, "subject_summary")
         rows = []
         for i, s in enumerate(self.subjects):
             for j, name in enumerate(self.parameters):
-                sep = np.quantile(self.separate[s][:, j], [a, 0.5, 1 - a])
-                shr = np.quantile(self.shrunk[:, :, i, j], [a, 0.5, 1 - a])
-                rows.append({"subject": s, "parameter": name, "separate": sep[1], "separate_lower": sep[0],
+                sep = _interval(self.separate[s][:, j], prob)
+                shr = _interval(self.shrunk[:, :, i, j], prob)
+                rows.append({"subject": s, "parameter": name, "sd": float(np.std(self.separate[s][:, j])),
+                             "separate": sep[1], "separate_lower": sep[0],
                              "separate_upper": sep[2], "shrunk": shr[1], "shrunk_lower": shr[0],
                              "shrunk_upper": shr[2], "contraction": self.contraction.get(s, {}).get(name, np.nan)})
         return pd.DataFrame(rows)
 
-    def effect(self, parameter, prob=0.95, reference=0.0):
+    def effect(self, parameter, prob=CI_PROB, reference=0.0):
         """Is a population parameter (a slope with a condition, e.g. contact_area's ``m1``)
-        below or above ``reference``?  Posterior probabilities and central ``prob`` interval of
+        below or above ``reference``?  Posterior probabilities and highest-density ``prob`` interval of
         the population mean (of ``mu`` in the population coordinate, i.e. of the median for a
         log-normal family), and of a new subject's value."""
         j = self._index(parameter)
@@ -192,18 +197,18 @@ class PopulationResult:
         m = self.mu[:, :, j].ravel()
         new = self.predictive()[:, j]
         new_u = np.log(new) if self.log[j] else new
-        a = 0.5 * (1 - prob)
-        lo, med, hi = np.quantile(m, [a, 0.5, 1 - a])
-        nlo, nhi = np.quantile(new, [a, 1 - a])
+        lo, med, hi = _interval(m, prob)
+        nlo, nhi = hdi(new, prob)
         centre = "median" if self.log[j] else "mean"
         tr = (lambda x: math.exp(x)) if self.log[j] else (lambda x: x)
         return {"parameter": parameter, "question": f"population {centre} of {parameter} vs {reference:g}",
-                "estimate": tr(med), "lower": tr(lo), "upper": tr(hi),
+                "estimate": tr(med), "sd": float(np.std(np.exp(m) if self.log[j] else m)), "lower": tr(lo),
+                "upper": tr(hi),
                 "p_below": float(np.mean(m < ref)), "p_above": float(np.mean(m > ref)),
                 "new_subject_lower": float(nlo), "new_subject_upper": float(nhi),
                 "p_new_subject_below": float(np.mean(new_u < ref))}
 
-    def contrast(self, a, b, prob=0.95):
+    def contrast(self, a, b, prob=CI_PROB):
         """Population-level contrast of two parameters (e.g. two levels of a split parameter):
         posterior of the difference of their population means (natural, or for log-normal
         families the ratio of medians), interval and P(A > B)."""
@@ -212,14 +217,14 @@ class PopulationResult:
         if self.log[ja] != self.log[jb]:
             raise InputError("contrast", f"{a} and {b} have different population coordinates")
         d = (self.mu[:, :, ja] - self.mu[:, :, jb]).ravel()
-        q = 0.5 * (1 - prob)
-        lo, med, hi = np.quantile(d, [q, 0.5, 1 - q])
+        lo, med, hi = _interval(d, prob)
         kind = "ratio of medians" if self.log[ja] else "difference of means"
         tr = np.exp if self.log[ja] else (lambda x: x)
-        return {"A": a, "B": b, "quantity": kind, "estimate": float(tr(med)), "lower": float(tr(lo)),
+        return {"A": a, "B": b, "quantity": kind, "estimate": float(tr(med)), "sd": float(np.std(tr(d))),
+                "lower": float(tr(lo)),
                 "upper": float(tr(hi)), "p_greater": float(np.mean(d > 0))}
 
-    def effects(self, prob=0.95):
+    def effects(self, prob=CI_PROB):
         """The default questions: every population parameter whose prior allows both signs
         (a slope with a condition) against 0, and each level of a split parameter against its
         first level.  A table."""
@@ -238,7 +243,7 @@ class PopulationResult:
             for other in names[1:]:
                 c = self.contrast(other, names[0], prob)
                 rows.append({"parameter": f"{other} vs {names[0]}", "question": c["quantity"],
-                             "estimate": c["estimate"], "lower": c["lower"], "upper": c["upper"],
+                             "estimate": c["estimate"], "sd": c["sd"], "lower": c["lower"], "upper": c["upper"],
                              "p_above": c["p_greater"], "p_below": 1 - c["p_greater"]})
         return pd.DataFrame(rows)
 
@@ -305,6 +310,13 @@ class PopulationResult:
         sampler that rarely moved, incomplete inputs): all but the notes that a subject's data
         barely move a parameter's prior, which is information about the data."""
         return [w for w in self.warnings if WEAK_DATA not in w]
+
+
+def _interval(x, prob):
+    """(lower, median, upper) of draws ``x`` (any shape, flattened): the posterior median and
+    the highest-density interval at ``prob``."""
+    lo, hi = hdi(x, prob)
+    return lo, float(np.median(x)), hi
 
 
 def _diag(name, qty, x):

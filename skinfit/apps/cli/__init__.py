@@ -49,6 +49,19 @@ def _positive_float(text):
     return value
 
 
+def _ci(text):
+    """argparse type of ``--ci``: an interval probability 0 < p < 1 (e.g. 0.9)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an interval probability, e.g. 0.9 (got {text!r})") from None
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"expected an interval probability between 0 and 1, e.g. 0.9 (got {text})")
+    return value
+
+
+_CI_HELP = "probability of every interval shown (highest-density intervals; default 0.94)"
+
 #: --seed: numpy seeds are >= 0, and a fit records its seed as a 64-bit integer
 _SEED = _int_in(0, 2**63 - 1, "a seed, an integer 0 .. 2**63-1")
 _COUNT = _int_in(1, 10**9, "a whole number >= 1")
@@ -186,6 +199,7 @@ def build_parser():
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.add_argument("--json", action="store_true", help="print the result as JSON (summary, seed, warnings)")
+    s.add_argument("--ci", type=_ci, default=None, metavar="PROB", help=_CI_HELP)
     s.set_defaults(func=_command("skinfit.apps.cli.fit"))
     s = sub.add_parser("compare", help="rank fits of the same data by evidence (log Z, Bayes factors) and LOO")
     s.add_argument("runs", nargs="+", help="run directories or fit.nc files")
@@ -202,6 +216,7 @@ def build_parser():
                    "the same fits (else one is computed with the defaults, and the report says so)")
     s.add_argument("--out", required=True, help="report directory, e.g. reports/NAME")
     s.add_argument("--json", action="store_true", help="print the report's path and fits as JSON")
+    s.add_argument("--ci", type=_ci, default=None, metavar="PROB", help=_CI_HELP)
     s.set_defaults(func=_command("skinfit.report.html", "cli_report"))
     s = sub.add_parser("campaign", help="run a (models x datasets x groups) matrix of fits")
     s.add_argument("campaign", help="campaign TOML file")
@@ -226,6 +241,7 @@ def build_parser():
     s.add_argument("--out", help="output directory (default RUN/population)")
     s.add_argument("--overwrite", action="store_true", help="replace a population already in --out")
     s.add_argument("--strict", action="store_true", help="exit 3 if not converged or the sampler warned")
+    s.add_argument("--ci", type=_ci, default=None, metavar="PROB", help=_CI_HELP)
     s.set_defaults(func=_command("skinfit.apps.cli.population"))
     s = sub.add_parser("sbc", help="simulation-based calibration of a model (Talts et al. 2018)")
     s.add_argument("model", help="model id")

@@ -47,7 +47,7 @@ def run(args):
                      ess_target=args.ess, max_steps=args.max_steps, checkpoint=checkpoint,
                      resume=args.resume, checkpoint_every=args.checkpoint_every)
         path = result.save(out / "fit.nc")  # still holding the lock: no other run sees the folder half written
-        summary = result.summary()
+        summary = result.summary(ci_prob=getattr(args, "ci", None))
         (out / "summary.csv").write_text(summary.to_csv())
         card = None
         if dataset is not None:  # a CSV without a card: its card and a copy beside the result
@@ -59,6 +59,7 @@ def run(args):
                           "seed": int(result.attrs["seed"]),
                           "converged": bool(result.converged), "warnings": result.warnings, "notes": result.notes,
                           "summary": json.loads(summary.to_json(orient="index")),
+                          "ci_prob": summary.attrs.get("ci_prob"), "ci_kind": summary.attrs.get("ci_kind"),
                           "seconds": time.perf_counter() - t0}, indent=2, default=str))
     else:
         print(result.report_text(summary))

@@ -15,6 +15,8 @@ from skinfit.analysis.population.result import PopulationWarning
 from skinfit.errors import InputError
 from skinfit.inference.checkpoint import CheckpointLock, replace_atomic
 from skinfit.io.outputs import check_outputs
+from skinfit.results.intervals import CI_PROB, interval_name
+from skinfit.results.summary import format_numbers
 
 __all__ = ["run", "FILES"]
 
@@ -85,7 +87,7 @@ def run(args):
                 result = population(args.run, params, family=family, correlated=args.correlated,
                                     method=args.method, rng=args.seed, model=args.model,
                                     max_sweeps=args.max_sweeps, cache=out / ".cache" / "population.npz")
-            tables = population_tables(result)
+            tables = population_tables(result, **({} if getattr(args, "ci", None) is None else {"prob": args.ci}))
             for name, table in (("summary", "hyper"), ("subjects", "subjects"), ("effects", "effects")):
                 replace_atomic(out / f"population_{name}.csv", tables[table].to_csv(index=False).encode())
             path = result.save(out / "population.nc")
@@ -110,10 +112,14 @@ def run(args):
              f"  (max R-hat {s['rhat_max']:.4f}, min ESS {s['ess_min']:.0f}"
              + (f", {s['sweeps']} sweeps of {s['chains']} chains" if "sweeps" in s else "") + ")",
              *[f"{'WARNING' if w in result.problems else 'NOTE'}: {w}" for w in result.warnings], ""]
-    with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
-        lines.append(tables["hyper"].to_string(index=False))
+    lines.append(f"intervals: {interval_name(CI_PROB if getattr(args, 'ci', None) is None else args.ci)} "
+                 "(highest-density); numbers to the precision their posterior sd allows (the CSV files have every "
+                 "digit)")
+    with pd.option_context("display.width", 200, "display.max_columns", 20):
+        lines.append(format_numbers(tables["hyper"]).to_string(index=False))
         if len(tables["effects"]):
-            lines += ["", "conditions as effects (population level):", tables["effects"].to_string(index=False)]
+            lines += ["", "conditions as effects (population level):",
+                      format_numbers(tables["effects"]).to_string(index=False)]
     print("\n".join(lines))
     print(f"\nwritten: {path}, {out / 'population_summary.csv'}, population_subjects.csv, population_effects.csv"
           f"  ({time.perf_counter() - t0:.1f} s)")
