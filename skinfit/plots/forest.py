@@ -17,6 +17,7 @@ from skinfit.plots.style import (
     finish_figure,
     log_ticks,
     new_figure,
+    plain_scale,
     suptitle,
     wrap_title,
 )
@@ -103,26 +104,6 @@ def _pooled(pairs):
     return {label for label, d in ids.items() if "[" not in d}
 
 
-def _scale(values, unit):
-    """(factor, unit text) that put ``values`` (SI) in plain numbers: an SI prefix on a simple
-    unit (``Pa`` -> ``kPa``), else a power of ten written in the unit (``10^-7 m^2/N^m``); values
-    are divided by the factor. (1, unit) where plain numbers already read well."""
-    top = np.nanmax(np.abs(values)) if np.size(values) else 1.0
-    if not np.isfinite(top) or top == 0 or 0.1 <= top < 10000:
-        return 1.0, unit
-    power = int(np.floor(np.log10(top) / 3) * 3)
-    if unit and re.fullmatch(r"[A-Za-z]+", unit) and power in _PREFIX:
-        return 10.0 ** power, _PREFIX[power] + unit
-    shown = "" if unit in (None, "", "1", "-") else f" {unit}"
-    return 10.0 ** power, f"10{str(power).translate(_SUPERSCRIPT)}{shown}"
-
-
-_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
-
-
-_PREFIX = {-12: "p", -9: "n", -6: "\u00b5", -3: "m", 3: "k", 6: "M", 9: "G"}
-
-
 def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=None):
     """Posterior mean and 94% HDI of a parameter across fits (subjects, conditions) and levels;
     several parameters side by side, one panel each, sharing the rows.
@@ -188,12 +169,12 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
 def _forest_panel(ax, name, rows, unit, pooled, population, y):
     """One parameter's panel: a row per fit (``rows``: label, mean, lo, hi, SI values), the
     pooled fits apart, the population band and row when given; the x axis scaled to plain
-    numbers (:func:`_scale`), its limits holding every interval with a margin."""
+    numbers (:func:`~skinfit.plots.style.plain_scale`), its limits holding every interval with a margin."""
     values = np.array([v for r in rows for v in r[1:]], dtype=float)
     pop = _population_interval(population) if population is not None else None
     if pop is not None:
         values = np.concatenate([values, pop])
-    factor, shown = _scale(values, unit)
+    factor, shown = plain_scale(values, unit)
     for part, style in ((False, {"color": COLOURS[0], "marker": "o", "ms": 4}),
                         (True, {"color": "0.45", "marker": "s", "mfc": "white", "ms": 5})):
         chosen = [r for r in rows if (r[0] in pooled) == part]
