@@ -424,3 +424,21 @@ def test_map_error_when_every_start_fails(tmp_path):
         skinfit.fit("electroadhesion", "electroadhesion_synthetic", priors=skinfit.load_priors(str(bad)),
                     rng=0, n_global=200)
     assert info.value.result.evaluations >= 200
+
+
+def test_only_a_shipped_models_fit_leaves_its_pointwise_groups_out_of_its_file(ea_fit):
+    """A model whose forward function ships with skinfit can compute them wherever the file is
+    read; a plug-in's or a user's may be missing there, so its fit keeps them (as does a fit
+    without the recipe, saved by an earlier skinfit)."""
+    import xarray as xr
+
+    from skinfit.results.pointwise import RECIPE, recomputable
+
+    assert recomputable(ea_fit.partial_tree)
+    other = xr.DataTree(xr.Dataset(attrs=dict(ea_fit.attrs)))
+    other.attrs["model_card"] = ea_fit.attrs["model_card"].replace(
+        "skinfit.physics.electroadhesion:electroadhesion", "my_lab.models:electroadhesion")
+    assert "my_lab.models" in other.attrs["model_card"] and not recomputable(other)
+    del other.attrs[RECIPE]
+    other.attrs["model_card"] = ea_fit.attrs["model_card"]
+    assert not recomputable(other)

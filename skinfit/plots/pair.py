@@ -115,10 +115,11 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
 
 
 def _broken(label, width):
-    """``label`` with its first line (the name) broken after an underscore where longer than ``width`` characters
-    (``sigma_contact_area`` -> ``sigma_contact_`` / ``area``), so that an x label stays within
-    its column."""
-    name, *rest = label.split("\n")  # the name only: a unit (N^n_z) is kept whole
+    """``label`` ("name\\n[unit]") with lines longer than ``width`` characters broken, so that an
+    x label stays within its column: the name after an underscore (``sigma_contact_area`` ->
+    ``sigma_contact_`` / ``area``), the unit after its power of ten (``[10⁻⁶`` / ``m^2/N^m]``;
+    never inside a unit such as ``N^n_z``)."""
+    name, *rest = label.split("\n")
     lines, current = [], ""
     parts = name.split("_")
     for k, part in enumerate(parts):
@@ -127,4 +128,5 @@ def _broken(label, width):
             lines.append(current)
             current = ""
         current += piece
+    rest = [u.replace(" ", "\n", 1) if len(u) > width else u for u in rest]  # "[10⁻⁶" over "m^2/N^m]"
     return "\n".join([*lines, current, *rest])

@@ -31,7 +31,7 @@ from skinfit.io.models import parse_model_text
 from skinfit.io.priors import PriorSet
 from skinfit.io.provenance import input_lines, inputs_of
 from skinfit.posterior import Posterior
-from skinfit.results.pointwise import RECIPE, Recomputed
+from skinfit.results.pointwise import RECIPE, Recomputed, recomputable
 from skinfit.results.store import fit_file, read_tree, write_tree
 from skinfit.results.summary import (
     SUMMARY_ATTR,
@@ -320,16 +320,18 @@ class Fit:
         """Write the fit as NetCDF, atomically (temporary file + rename), with the sha256 of each
         group and of the root attributes (:mod:`skinfit.io.integrity`), which :func:`load_fit`
         checks.  A pending fit is completed first.  Every group is written but those of
-        :data:`DEFERRED` of a fit that records how to compute them again
-        (:data:`skinfit.results.pointwise.RECIPE`: nine tenths of the bytes, computed again on
-        first use after :func:`load_fit`); a fit loaded from a file that holds them (saved by an
-        earlier skinfit) keeps them.  ``path`` is the file (a directory, a device such as
-        /dev/null or a FIFO there is refused first)."""
+        :data:`DEFERRED` of a fit that records how to compute them again, of a model that ships
+        with skinfit (:func:`skinfit.results.pointwise.recomputable`: nine tenths of the bytes,
+        computed again on first use after :func:`load_fit`); a plug-in's or a user's model's fit,
+        and one loaded from a file that holds them (saved by an earlier skinfit), keeps them.
+        ``path`` is the file (a directory, a device such as /dev/null or a FIFO there is refused
+        first)."""
         path = check_output_file(path, "Fit.save", "path", "fit")
         path.parent.mkdir(parents=True, exist_ok=True)
         if self.pending:
             self.complete()
-        if RECIPE not in self._tree.attrs:  # an earlier skinfit's fit: its pointwise groups cannot be made again
+        leave_out = recomputable(self._tree)
+        if not leave_out:  # an earlier skinfit's fit, or a plug-in's model: the groups are saved with it
             self._read_stored()
         tree = self._tree
         schema = tree.attrs.get(integrity.SCHEMA_ATTR)
@@ -342,7 +344,7 @@ class Fit:
             warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
                           f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)
         written = tree
-        if RECIPE in tree.attrs:
+        if leave_out:
             written = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
                                             | {n: tree[n].to_dataset(inherit=False) for n in tree.children
                                                if n not in DEFERRED})

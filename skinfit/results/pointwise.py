@@ -16,14 +16,16 @@ a report's figure worker that does not import arviz_base.
 """
 
 import json
+import tomllib
 
 import numpy as np
 import xarray as xr
 
 from skinfit.errors import InputError
 from skinfit.io.labels import annotate
+from skinfit.io.registry import BUILTIN
 
-__all__ = ["RECIPE", "pointwise_tree", "fingerprint", "make_recipe", "theta_of", "Recomputed"]
+__all__ = ["RECIPE", "pointwise_tree", "fingerprint", "make_recipe", "recomputable", "theta_of", "Recomputed"]
 
 #: Root attribute of a fit whose pointwise groups are computed from its draws (JSON: ``seed``,
 #: four integers; ``every`` and ``walker_step``, the thinning; ``sums``, :func:`fingerprint`).
@@ -69,6 +71,21 @@ def make_recipe(seed, every, walker_step, tree):
     :func:`pointwise_tree` with ``seed`` (four integers), ``every`` and ``walker_step``."""
     return json.dumps({"seed": [int(s) for s in np.asarray(seed).ravel()], "every": int(every),
                        "walker_step": int(walker_step), "sums": fingerprint(tree)})
+
+
+def recomputable(tree):
+    """True when the pointwise groups of ``tree`` (a fit's) can be left out of its file: it has
+    their :data:`RECIPE` and its model's forward function ships with skinfit
+    (:data:`skinfit.io.registry.BUILTIN`), so that wherever skinfit reads the file it can compute
+    them again. A plug-in's or a user's model may be missing where the file is read (a report
+    on another machine): its fit keeps them."""
+    if RECIPE not in tree.attrs:
+        return False
+    try:
+        forward = tomllib.loads(tree.attrs["model_card"]).get("forward")
+    except (KeyError, TypeError, tomllib.TOMLDecodeError):
+        return False
+    return forward in BUILTIN["forward"]
 
 
 def theta_of(post, posterior):
