@@ -629,3 +629,21 @@ def test_property_damaged_candidates_file_is_an_input_error_or_valid(tmp_path):
     assert tomllib.loads(dumps(GRID_DOC)) == GRID_DOC
     parsed()
     text()
+
+
+def test_design_figure_keeps_its_labels_inside_and_names_its_markers(tmp_path):
+    """The EIG figure at its saved size: every text inside the canvas, none overlapping, none
+    under 8 pt (the y label was cut at the top); its legend names the plan's circles and the
+    band."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from layout import layout_problems
+
+    from skinfit.plots.design import plot_eig
+
+    cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
+                                                                                          "values": [0, 200]}}}
+    result = skinfit.design("electroadhesion", cands, n=3, rng=2, n_outer=40, n_inner=40, noise_scale=0.02)
+    fig = plot_eig(result, tmp_path / "eig.png")
+    assert not layout_problems(fig), layout_problems(fig)[:6]
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "in the plan (size: repeats)" in legend and "±2 Monte Carlo standard errors" in legend

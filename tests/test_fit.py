@@ -142,22 +142,70 @@ def test_a_stored_summary_is_never_shown_for_other_draws_or_records(ea_fit, tmp_
         pd.testing.assert_frame_equal(fit.summary(), ea_fit.summary(), check_exact=True)
 
 
-def test_a_loaded_fit_reads_its_pointwise_groups_on_first_use_from_the_same_file(ea_fit, tmp_path):
-    """load_fit gives the tree xarray reads (every group, the file's order) with the two
-    pointwise groups read only when used; a file replaced in between is an InputError, never
-    a tree of two results."""
+def test_a_loaded_fit_computes_its_pointwise_groups_on_first_use_bit_for_bit(ea_fit, tmp_path):
+    """The file holds every group but the two pointwise ones (their recipe instead: seed,
+    thinning, sums); load_fit gives the tree xarray reads, and the pointwise groups computed
+    again on first use from the draws and data in the file are those of the fit that was saved,
+    bit for bit, with their units; its PSIS-LOO the same number."""
     import xarray as xr
 
+    from skinfit.analysis.compare import loo
+    from skinfit.results.fit import DEFERRED, GROUPS
+
     path = ea_fit.save(tmp_path / "fit.nc")
+    on_disk = xr.open_datatree(path).load()
+    assert list(on_disk.children) == [g for g in GROUPS if g not in DEFERRED and g != "derived"]
     fit = skinfit.load_fit(path)
     assert "log_likelihood" not in fit.partial_tree.children and fit.content_hash() == ea_fit.content_hash()
+    xr.testing.assert_identical(fit.partial_tree, on_disk)
     assert fit.summary_stored and fit.group("posterior_predictive")["tangential_force"].shape[-1] == 216
+    assert list(fit.idata.children) == list(ea_fit.idata.children)
+    for group in DEFERRED:
+        xr.testing.assert_identical(fit.idata[group].to_dataset(), ea_fit.idata[group].to_dataset())
+    assert float(loo(fit).elpd) == float(loo(ea_fit).elpd)
+
+
+def test_a_fit_saved_with_its_pointwise_groups_as_float64_still_loads_them_from_its_file(ea_fit, tmp_path):
+    """A file of an earlier skinfit (the pointwise groups stored, float64, no recipe) reads them
+    from the file on first use, and saved again keeps them; a file replaced in between is an
+    InputError, never a tree of two results."""
+    import xarray as xr
+
+    from skinfit.results.pointwise import RECIPE
+    from skinfit.results.store import write_tree
+
+    tree = ea_fit.idata.copy()
+    del tree.attrs[RECIPE]
+    path = write_tree(tree, tmp_path / "old.nc")
+    assert xr.open_datatree(path)["log_likelihood"]["tangential_force"].dtype == np.float64
+    fit = skinfit.load_fit(path)
+    assert "log_likelihood" not in fit.partial_tree.children
     xr.testing.assert_identical(fit.idata, xr.open_datatree(path).load())
-    assert list(fit.idata.children) == list(xr.open_datatree(path).children)
+    fit.save(tmp_path / "again.nc")
+    assert "log_likelihood" in xr.open_datatree(tmp_path / "again.nc").children
     stale = skinfit.load_fit(path)
     skinfit.load_fit(path).save(path)  # the file replaced (here by the same content)
     with pytest.raises(InputError, match="changed or removed since the fit was loaded"):
         stale.idata
+
+
+def test_pointwise_groups_computed_again_to_other_numbers_are_refused(ea_fit, tmp_path):
+    """A recipe whose sums differ from what the draws give now (as a skinfit whose model gives
+    other numbers would find): one line naming the file, never the other numbers."""
+    import json
+
+    from skinfit.results.pointwise import RECIPE
+    from skinfit.results.store import write_tree
+
+    tree = skinfit.load_fit(ea_fit.save(tmp_path / "fit.nc")).partial_tree.copy()
+    recipe = json.loads(tree.attrs[RECIPE])
+    recipe["sums"]["log_likelihood"]["tangential_force"][0] *= 1 + 1e-6
+    tree.attrs[RECIPE] = json.dumps(recipe)
+    path = write_tree(tree, tmp_path / "other.nc")
+    fit = skinfit.load_fit(path)
+    with pytest.raises(InputError, match=rf"^{path}: its log_likelihood \(tangential_force\) computed again from "
+                                         "its draws differs from when it was fitted"):
+        fit.idata
 
 
 def test_result_tree_groups_and_provenance(ea_fit):
@@ -376,3 +424,21 @@ def test_map_error_when_every_start_fails(tmp_path):
         skinfit.fit("electroadhesion", "electroadhesion_synthetic", priors=skinfit.load_priors(str(bad)),
                     rng=0, n_global=200)
     assert info.value.result.evaluations >= 200
+
+
+def test_only_a_shipped_models_fit_leaves_its_pointwise_groups_out_of_its_file(ea_fit):
+    """A model whose forward function ships with skinfit can compute them wherever the file is
+    read; a plug-in's or a user's may be missing there, so its fit keeps them (as does a fit
+    without the recipe, saved by an earlier skinfit)."""
+    import xarray as xr
+
+    from skinfit.results.pointwise import RECIPE, recomputable
+
+    assert recomputable(ea_fit.partial_tree)
+    other = xr.DataTree(xr.Dataset(attrs=dict(ea_fit.attrs)))
+    other.attrs["model_card"] = ea_fit.attrs["model_card"].replace(
+        "skinfit.physics.electroadhesion:electroadhesion", "my_lab.models:electroadhesion")
+    assert "my_lab.models" in other.attrs["model_card"] and not recomputable(other)
+    del other.attrs[RECIPE]
+    other.attrs["model_card"] = ea_fit.attrs["model_card"]
+    assert not recomputable(other)

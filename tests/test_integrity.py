@@ -50,15 +50,15 @@ def run(tmp_path_factory):
 
 def _region(path, where):
     """A byte offset inside ``where`` of the saved fit at ``path``: the posterior's values, the
-    pointwise log-likelihood's values (read only on first use), a root attribute's text (the
+    prior's values, a root attribute's text (the recipe of the pointwise groups, the
     cached evidence, the sampler record), HDF5's own metadata (the superblock; a group's
     object header)."""
     data = path.read_bytes()
     with h5py.File(path, "r") as f:
         if where == "posterior values":
             return f["posterior"]["m0"].id.get_offset()
-        if where == "pointwise values":
-            return f["log_likelihood"]["contact_area"].id.get_offset() + 1000
+        if where == "prior values":
+            return f["prior"]["m0"].id.get_offset()
         if where == "group header":
             return h5py.h5o.get_info(f["posterior"].id).addr
     if where == "superblock":
@@ -67,6 +67,8 @@ def _region(path, where):
         return data.index(b'"bridge"')
     if where == "sampler attribute":
         return data.index(b'"nwalkers"')
+    if where == "pointwise recipe":
+        return data.index(b'"walker_step"')
     raise ValueError(where)
 
 
@@ -85,7 +87,7 @@ def _zeroed(src, dst, offset, size=4096):
     return dst
 
 
-REGIONS = ["posterior values", "pointwise values", "evidence attribute", "sampler attribute", "superblock",
+REGIONS = ["posterior values", "pointwise recipe", "evidence attribute", "sampler attribute", "superblock",
            "group header"]
 
 
@@ -101,8 +103,8 @@ def _refusal(argv):
 
 @pytest.mark.parametrize("where", REGIONS)
 def test_damaged_fit_file_is_refused_by_every_reader_never_read_as_other_numbers(run, tmp_path, where, no_figures):
-    """4 KiB zeroed in the data (the posterior's; the pointwise groups', which compare, report and
-    population may not read), the attributes (the cached evidence, the sampler record) and
+    """4 KiB zeroed in the data (the posterior's), the attributes (the recipe of the pointwise
+    groups, which compare, report and population may not use; the cached evidence, the sampler record) and
     HDF5's own metadata of a fit.nc: load_fit, `skinfit compare`, `skinfit report` and `skinfit
     population` each refuse it with one line naming the file and what failed, before any of
     its numbers is used."""
@@ -123,18 +125,18 @@ def test_damaged_fit_file_is_refused_by_every_reader_never_read_as_other_numbers
     assert not (damaged_run / "population").exists()
 
 
-@pytest.mark.parametrize("where", ["posterior values", "pointwise values"])
+@pytest.mark.parametrize("where", ["posterior values", "prior values"])
 def test_damaged_fit_file_without_its_end_is_refused_by_its_content_checksums(run, tmp_path, where):
     """The same damage to the values of a fit.nc whose trailer is gone too (its end lost, or
     written by another tool from skinfit's tree): the checksums of its groups refuse it, naming
-    the group, once it is read (the pointwise groups on first use). (Not the attributes: HDF5
+    the group. (Not the attributes: HDF5
     2.0 hangs reading a text attribute whose heap was zeroed, which only the trailer, checked
     before HDF5 opens the file, prevents; bench/results/integrity.md.)"""
     path = _zeroed(_unsealed(run / "S01" / "fit.nc", tmp_path / "unsealed.nc"), tmp_path / "fit.nc",
                    _region(run / "S01" / "fit.nc", where))
     with pytest.raises(skinfit.InputError) as caught:
         skinfit.load_fit(path).complete()
-    group = "posterior" if where == "posterior values" else "log_likelihood"
+    group = "posterior" if where == "posterior values" else "prior"
     assert str(caught.value) == (f"{path}: damaged: the content of group {group} differs from what skinfit wrote "
                                  "(sha256 mismatch): the file changed after it was saved (a disk or copy error, or an "
                                  "edit); restore it from a copy or fit again")
@@ -159,7 +161,7 @@ def test_the_checksums_are_those_every_netcdf_reader_sees(run):
     record = integrity.take(path, tree.attrs, list(tree.children))
     integrity.verify(path, record, groups={n: tree[n].to_dataset(inherit=False) for n in tree.children})
     assert set(record["groups"]) == set(tree.children) and "posterior" in record["groups"]
-    ours = skinfit.load_fit(path).idata
+    ours = skinfit.load_fit(path).partial_tree  # all the file holds (the pointwise groups are computed again)
     xr.testing.assert_identical(ours, tree)
     import h5netcdf
 

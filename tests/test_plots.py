@@ -3,6 +3,7 @@ posterior-predictive bands that hold their stated share of data simulated from t
 
 import math
 import os
+import re
 import sys
 import tomllib
 import warnings
@@ -110,7 +111,11 @@ def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_p
         fig = func(fit, tmp_path / f"{name}.png")
         _written(tmp_path / f"{name}.png")
         xlabels, ylabels = _labels(fig)
-        shown = {label.replace("\n", " ") for label in xlabels | ylabels}  # "name\n[unit]" in the corner plot
+        # "name\n[unit]" in the corner plot, a long name broken after an underscore, the unit with an SI
+        # prefix or a power of ten where its values need one (10⁻³ 1/N, kPa)
+        shown = {re.sub(r"\[(10[⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+ |[pnµmkMG](?=[A-Za-z]+\]$))", "[",
+                        re.sub(r"\[10[⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+\]", "[-]", label.replace("_\n", "_").replace("\n", " ")))
+                 for label in xlabels | ylabels}
         wanted = list(expected.values())[:10] if name == "pair" else expected.values()
         missing = [w for w in wanted if w not in shown]
         assert not missing, f"{name}: no axis labelled {missing}"
@@ -211,6 +216,7 @@ def test_forest_over_levels_fits_and_population(simulated_fit, ea_fit, tmp_path)
     assert ax.get_xlabel() == "mu [-]"
     ticks = [t.get_text() for t in ax.get_yticklabels()]
     assert ticks == [f"voltage = {v}" for v in range(0, 201, 50)] + ["population"]
+    assert not layout_problems(fig), layout_problems(fig)[:6]
     table = fit.summary()
     np.testing.assert_allclose(sorted(ax.lines[0].get_xdata()), sorted(table.loc[[f"mu[{v}]" for v in
                                                                                    range(0, 201, 50)], "mean"]))
@@ -223,6 +229,71 @@ def test_forest_over_levels_fits_and_population(simulated_fit, ea_fit, tmp_path)
     assert fig.axes[0].get_xlabel() == "alpha [-]"
     with pytest.raises(skinfit.InputError, match="no parameter 'nope'"):
         plots.plot_forest(a, "nope")
+
+
+def _subject_tables(ea_fit, n=6):
+    """Summary tables of ``n`` made-up subjects (the electroadhesion fit's, shifted), by label."""
+    base = ea_fit.summary()
+    out = {}
+    for k in range(n):
+        t = base.copy()
+        t[["mean", "hdi_3%", "hdi_97%"]] *= 1 + 0.08 * k
+        out[f"S{k + 1:02d}"] = t
+    return out
+
+
+def test_forests_of_several_parameters_side_by_side_share_the_rows(ea_fit):
+    """One panel per parameter, four to a row, the subjects as shared rows (labels on the left
+    panels only), every text inside the canvas, none overlapping, none under 8 pt; the
+    population's ends inside its panel's x range (never cut at the axis)."""
+    tables = _subject_tables(ea_fit)
+    names = ["E_star", "tau0", "beta0", "phi", "alpha"]
+    fig = plots.plot_forest(tables, names, unit="1", population={"alpha": {"median": 0.5, "lo": 0.05, "hi": 0.9}})
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(axes) == len(names) and [ax.get_xlabel().split(" [")[0] for ax in axes] == names
+    assert [t.get_text() for t in axes[0].get_yticklabels()] == [*tables, "population"]
+    assert all(not any(t.get_visible() and t.get_text() for t in ax.get_yticklabels()) for ax in (axes[1], axes[2]))
+    lo, hi = axes[4].get_xlim()
+    assert lo < 0.05 and hi > 0.9
+    assert not layout_problems(fig), layout_problems(fig)[:6]
+
+
+def test_a_pooled_fit_is_drawn_apart_from_the_subjects_and_the_legend_says_what_each_marker_is(ea_fit):
+    """A fit of the whole dataset among fits of its subjects: its own row, below the subjects,
+    an open grey square, named in the legend; the subjects labelled by the level they select."""
+    from skinfit.results.fit import Fit
+
+    subjects = []
+    for level in ("0", "100"):
+        tree = ea_fit.partial_tree.copy()
+        tree.attrs["dataset_id"] = f"electroadhesion_synthetic[voltage={level}]"
+        subjects.append(Fit(tree))
+    assert ea_fit.dataset_id == "electroadhesion_synthetic"
+    fig = plots.plot_forest([*subjects, ea_fit], "alpha")
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["0", "100", "electroadhesion_synthetic"]
+    squares = [line for line in ax.lines if line.get_marker() == "s"]
+    assert len(squares) == 1 and squares[0].get_ydata()[0] == 0  # the bottom row
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert legend == ["fit: posterior mean, 94% HDI", "pooled fit (all data): mean, 94% HDI"]
+    assert not layout_problems(fig), layout_problems(fig)[:6]
+
+
+def test_forest_ticks_are_plain_numbers_with_the_power_in_the_unit():
+    """Values of 1e-7 m^2/N^m read 1, 2, 3 on the axis with 10⁻⁶ or 10⁻⁹ in the unit; kPa for a
+    modulus of 1e5 Pa; never an offset text beside the axis."""
+    table = pd.DataFrame({"mean": [2e-7, 3e-7], "hdi_3%": [1.5e-7, 2.5e-7], "hdi_97%": [2.5e-7, 3.5e-7]},
+                         index=["a", "a"])
+    fig = plots.plot_forest({"x": table.iloc[[0]], "y": table.iloc[[1]]}, "a", unit="m^2/N^m")
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "a [10⁻⁹ m^2/N^m]" and not ax.xaxis.get_offset_text().get_text()
+    lo, hi = ax.get_xlim()
+    ticks = [v for v in ax.get_xticks() if lo <= v <= hi]
+    assert min(ticks) >= 100 and max(ticks) <= 400 and len(ticks) >= 3
+    modulus = table * 5e11
+    fig = plots.plot_forest({"x": modulus.iloc[[0]], "y": modulus.iloc[[1]]}, "a", unit="Pa")
+    assert fig.axes[0].get_xlabel() == "a [kPa]"
 
 
 def test_comparison_chart_relative_to_best(tmp_path):

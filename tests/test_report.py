@@ -362,8 +362,8 @@ def test_cli_report_from_run_directories(rival, tmp_path, capsys):
     # one fit saved twice: two sections, told apart by their files (skinfit.results.run_labels)
     summaries = sorted(key for kind, key in page.tables if kind == "summary")
     assert len(summaries) == 2 and "file_S01_fit.nc" in summaries[0] and "file_S02_fit.nc" in summaries[1]
-    # two fits of one model: forest plots across them
-    assert any("across_electroadhesion_coulomb_mu" in link for link in page.links)
+    # two fits of one model: one figure of forest plots across them, every parameter side by side
+    assert any(link.endswith("across_electroadhesion_coulomb.png") for link in page.links)
     assert main(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep2")]) == 2
     assert "no such run directory" in capsys.readouterr().err
 

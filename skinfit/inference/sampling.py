@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import emcee
 import numpy as np
 from arviz_stats import rhat as az_rhat
-from tqdm.auto import tqdm
 
 from skinfit.inference.moves import DEMove, IndependenceMove, default_moves
+from skinfit.inference.progress import Progress
 from skinfit.inference.proposal import MixtureT, fit_mixture, select_mixture
 
 __all__ = ["SamplerRun", "run_emcee", "initial_ball", "check_points", "independence_move", "adaptive_moves",
@@ -199,14 +199,19 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
                              accepted=backend.accepted, random_state=backend.random_state or state.random_state,
                              counts=counts, seconds=spent + time.perf_counter() - t0)
 
-    bar = _progress_bar(progress, max_steps)
-    if bar is not None:
-        bar.update(n)
     reasons, tau, burn, ess, rhat, thin = ("not run",), np.full(d, np.nan), 0, np.zeros(d), float("nan"), 1
     checks = list(check_points(check_every, max_steps))
+
+    def following(step):  # the step of the next check (a refit step is one too), None past max_steps
+        due = [c for c in checks if c >= step] + ([next_adapt] if next_adapt is not None and next_adapt >= step else [])
+        return min(due) if due else None
+
+    bar = Progress(ess_target) if progress else None
+    if bar is not None:
+        bar.start(n, following(n))
     try:
         while True:
-            target = min([c for c in checks if c >= n] + ([next_adapt] if next_adapt is not None else []))
+            target = following(n)
             if target > n:
                 for new_state in sampler.sample(state, iterations=target - n):
                     state = new_state  # the last one is where the next stretch starts
@@ -214,7 +219,7 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
                         raise raised[0]
                     counts = tally()
                     if bar is not None:
-                        bar.update(1)
+                        bar.step()
                     if checkpoint is not None and checkpoint.due():
                         save()
                 n = target
@@ -223,15 +228,17 @@ def run_emcee(post, p0, rng, *, ess_target=400, rhat_max=1.01, min_tau_multiple=
             tau, burn, ess, rhat, thin, reasons = _check(
                 sampler.get_chain(), ess_target, rhat_max, min_tau_multiple, burn_factor, keep_total,
                 start=start, need_rhat=target >= max_steps or bar is not None, natural=natural)
-            if bar is not None:
-                bar.set_postfix_str(f"tau={tau.max():.0f} ess={ess.min():.0f} rhat={rhat:.3f}")
             if not reasons:
                 break
             if target == next_adapt:
                 start, next_adapt = _apply_refit(indep, sampler.get_chain(), target, start, seed, proposal.nu,
                                                  history, max_steps)
+            if bar is not None:  # against the next check, never against max_steps
+                bar.check(n, tau, ess, rhat, reasons, following(n + 1) if checks else None)
             if not checks:
                 break
+        if bar is not None and not reasons:
+            bar.check(n, tau, ess, rhat, reasons, None)
     except KeyboardInterrupt:
         save()
         raise
@@ -471,9 +478,3 @@ def integrated_time(x, c=5):
         short = np.arange(n) < c * taus  # Sokal: the first M >= c tau(M) ...
         tau[j] = taus[n - 1] if short.all() else taus[np.argmin(short)]  # ... else the chain is too short
     return tau
-
-
-def _progress_bar(progress, total):
-    if not progress:
-        return None
-    return tqdm(total=total, desc="emcee", unit="step", leave=False, mininterval=0.5)

@@ -2,8 +2,10 @@
 (:func:`skinfit.analysis.design.design`)."""
 
 import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
-from skinfit.plots.style import finish_figure, new_figure
+from skinfit.plots.style import MIN_FONT, finish_figure, new_figure, wrap_title
 
 __all__ = ["plot_eig"]
 
@@ -36,9 +38,12 @@ def plot_eig(result, path=None):
     if result.plot.get("xscale") == "log":
         ax.set_xscale("log")
     ax.set_xlabel(xcol or "candidate")
-    ax.set_ylabel("expected information gain of one measurement [nats]")
-    ax.set_title(f"{result.model_id}: targets {', '.join(result.settings['params'])}; circles = plan "
-                 f"(size = repeats)", fontsize=9)
-    if len(groups) > 1:
-        ax.legend(fontsize=7)
+    ax.set_ylabel("expected information gain\nof one measurement [nats]")  # two lines: one was cut at 4 in
+    ax.set_title(wrap_title(f"{result.model_id}: targets {', '.join(result.settings['params'])}", ax), fontsize=9)
+    handles, _ = ax.get_legend_handles_labels()
+    handles.append(Line2D([], [], ls="none", marker="o", mfc="none", mec="k", ms=7,
+                          label="in the plan (size: repeats)"))
+    handles.append(Patch(color="0.5", alpha=0.3, lw=0, label="\u00b12 Monte Carlo standard errors"))
+    fig.legend(handles=handles, fontsize=MIN_FONT, frameon=False, loc="outside lower center",
+               ncols=min(len(handles), 3))
     return finish_figure(fig, path)

@@ -4,8 +4,17 @@ import matplotlib.ticker
 import numpy as np
 from matplotlib.figure import Figure
 
-from skinfit.plots.reading import sampled_slots, slot_label, slot_values, use_log
-from skinfit.plots.style import COLOURS, MAP_COLOUR, MAX_WIDTH, MIN_FONT, finish_figure, log_ticks, suptitle
+from skinfit.plots.reading import param_label, sampled_slots, slot_values, use_log
+from skinfit.plots.style import (
+    COLOURS,
+    MAP_COLOUR,
+    MAX_WIDTH,
+    MIN_FONT,
+    finish_figure,
+    log_ticks,
+    plain_scale,
+    suptitle,
+)
 from skinfit.results.fit import as_fit
 
 __all__ = ["plot_pair"]
@@ -29,17 +38,24 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
     values = np.column_stack([slot_values(ds, s).ravel() for s in slots])
     if len(values) > max_draws:
         values = values[np.linspace(0, len(values) - 1, max_draws).astype(int)]
-    mapv = fit.map
+    # plain numbers on every axis: each parameter in its unit with an SI prefix or a power of ten
+    scales = [plain_scale(values[:, k], s["unit"]) for k, s in enumerate(slots)]
+    values = values / np.array([f for f, _ in scales])
+    mapv = {s["name"]: fit.map[s["name"]] / f for s, (f, _) in zip(slots, scales)}
     d = len(slots)
     size = min(1.6 * d + 1.4, MAX_WIDTH)
     fig = Figure(figsize=(size, size))  # a fixed layout: constrained layout is slow on d*d axes
     # labels as "name\n[unit]"; with more than 5 parameters a cell is too small for a label
-    # along its side: x labels turned upright, y labels written across, margins to fit them
+    # along its side: y labels written across, margins to fit them
     compact = d > 5
-    labels = [slot_label(s).replace(" [", "\n[") for s in slots]
+    cell_chars = int((size - 1.2) / d * 72 / (0.6 * MIN_FONT))  # a column's width in characters, roughly
+    labels = [_broken(param_label(s["name"], shown).replace(" [", "\n["), cell_chars)
+              for s, (_, shown) in zip(slots, scales)]
     chars = max(len(line) for text in labels for line in text.split("\n"))
-    label_in = chars * 0.6 * MIN_FONT / 72 + 0.15 if compact else 2 * 1.3 * MIN_FONT / 72 + 0.1
-    fig.subplots_adjust(left=(0.55 + label_in) / size, bottom=(0.55 + label_in) / size, right=1 - 0.15 / size,
+    two_lines = max(t.count("\n") + 1 for t in labels) * 1.3 * MIN_FONT / 72 + 0.1
+    left_in = chars * 0.6 * MIN_FONT / 72 + 0.15 if compact else two_lines
+    # x labels stay level under the upright tick labels (turned upright too they ran into them)
+    fig.subplots_adjust(left=(0.55 + left_in) / size, bottom=(0.7 + two_lines) / size, right=1 - 0.15 / size,
                         top=1 - 0.6 / size, wspace=0.1, hspace=0.1)
     gs = fig.add_gridspec(d, d)
     log = [use_log(s, values[:, k]) for k, s in enumerate(slots)]
@@ -64,7 +80,7 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
                 if log[i]:
                     ax.set_yscale("log")
             if i == d - 1:
-                ax.set_xlabel(labels[j], fontsize=MIN_FONT, rotation=90 if compact else 0)
+                ax.set_xlabel(labels[j], fontsize=MIN_FONT)
             else:
                 ax.tick_params(labelbottom=False)
             if j == 0 and i > 0:
@@ -96,3 +112,21 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
                     log_ticks(axes[i, j], which, 3, sparse=True)
     suptitle(fig, f"{fit.model_id} on {fit.dataset_id}: posterior draws (MAP in orange-red)")
     return finish_figure(fig, path)
+
+
+def _broken(label, width):
+    """``label`` ("name\\n[unit]") with lines longer than ``width`` characters broken, so that an
+    x label stays within its column: the name after an underscore (``sigma_contact_area`` ->
+    ``sigma_contact_`` / ``area``), the unit after its power of ten (``[10⁻⁶`` / ``m^2/N^m]``;
+    never inside a unit such as ``N^n_z``)."""
+    name, *rest = label.split("\n")
+    lines, current = [], ""
+    parts = name.split("_")
+    for k, part in enumerate(parts):
+        piece = part + ("_" if k < len(parts) - 1 else "")
+        if current and len(current) + len(piece) > width:
+            lines.append(current)
+            current = ""
+        current += piece
+    rest = [u.replace(" ", "\n", 1) if len(u) > width else u for u in rest]  # "[10⁻⁶" over "m^2/N^m]"
+    return "\n".join([*lines, current, *rest])

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import matplotlib
 import matplotlib.layout_engine
+import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter, NullLocator
@@ -20,7 +21,7 @@ from PIL import Image
 
 __all__ = ["COLOURS", "MAP_COLOUR", "DPI", "MAX_WIDTH", "MIN_FONT", "SAVE_RC", "ensure_backend", "new_figure",
            "suptitle", "wrap_title", "log_ticks", "save_figure", "finish_figure", "fix_layout",
-           "write_figure_files"]
+           "write_figure_files", "plain_scale"]
 
 #: Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008; yellow left out: too
 #: pale on white), then two darker greys.
@@ -147,3 +148,23 @@ def write_figure_files(fig, path):
     rgba = Image.frombuffer("RGBA", canvas.get_width_height(physical=True), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
     rgba.convert("RGB").quantize(256).save(path, format="png", optimize=True, dpi=(DPI, DPI))
     save_figure(fig, path.with_suffix(".pdf"), format="pdf", metadata={"CreationDate": None})
+
+
+def plain_scale(values, unit):
+    """(factor, unit text) that put ``values`` (SI) in plain numbers: an SI prefix on a simple
+    unit (``Pa`` -> ``kPa``), else a power of ten written in the unit (``10⁻⁹ m^2/N^m``); values
+    are divided by the factor. (1, unit) where plain numbers already read well."""
+    top = np.nanmax(np.abs(values)) if np.size(values) else 1.0
+    if not np.isfinite(top) or top == 0 or 0.1 <= top < 10000:
+        return 1.0, unit
+    power = int(np.floor(np.log10(top) / 3) * 3)
+    if unit and re.fullmatch(r"[A-Za-z]+", unit) and power in _PREFIX:
+        return 10.0 ** power, _PREFIX[power] + unit
+    shown = "" if unit in (None, "", "1", "-") else f" {unit}"
+    return 10.0 ** power, f"10{str(power).translate(_SUPERSCRIPT)}{shown}"
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
+
+
+_PREFIX = {-12: "p", -9: "n", -6: "\u00b5", -3: "m", 3: "k", 6: "M", 9: "G"}

@@ -461,9 +461,10 @@ def shown_population_rows(hyper):
 
 
 def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=CI_PROB):
-    """Per model with several fits (subjects, conditions): a table and a forest plot of each
-    parameter across the fits, labelled by subject as written in the data, and the model's
-    population result when given. The forest plots are appended to ``jobs`` (drawn with the
+    """Per model with several fits (subjects, conditions): a table of each parameter across the
+    fits, one figure of forest plots of every parameter side by side, the fits labelled by subject
+    as written in the data, and the model's population result when given. The figure's job is
+    appended to ``jobs`` (drawn with the
     fits' own figures by :func:`skinfit.report.figures.render_figures`)."""
     by_model = {}
     index = {key: i for i, (key, _) in enumerate(items)}
@@ -515,16 +516,20 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
         entry = {"model_id": model_id, "fits": list(labelled), "figures": figures, "tables": tables,
                  "population": pop_tables, "id": f"across-{len(out) + 1}"}
         labels = {label: index[k] for label, (k, _) in zip(labelled, group)}
-        for pname in group[0][1].group("posterior").data_vars:
-            path = figdir / f"across_{safe}_{pname}.png"
+        pops = {}
+        pnames = list(group[0][1].group("posterior").data_vars)
+        for pname in pnames:
             pop = population_for(population, model_id, pname)
             if pop is None and pop_info is not None:
                 pop = pop_info["intervals"].get(pname)
-            caption = f"{pname} across {len(group)} fits" + (" with the population distribution" if pop is not None
-                                                              else "")
-            figures.append({"file": f"figures/{path.name}", "caption": caption,
-                            "alt": f"forest plot of {pname} across the fits of {model_id}"})
-            jobs.append({"fit": labels, "func": "plot_forest", "args": (pname,), "kwargs": {"population": pop},
-                         "path": path, "entry": figures[-1], "across": entry})
+            if pop is not None:
+                pops[pname] = pop
+        path = figdir / f"across_{safe}.png"  # every parameter side by side, one panel each, the fits as rows
+        caption = (f"{', '.join(pnames)} across {len(group)} fits (a panel each)"
+                   + (f"; population distribution of {', '.join(pops)}" if pops else ""))
+        figures.append({"file": f"figures/{path.name}", "caption": caption,
+                        "alt": f"forest plots of {', '.join(pnames)} across the fits of {model_id}"})
+        jobs.append({"fit": labels, "func": "plot_forest", "args": (pnames,), "kwargs": {"population": pops},
+                     "path": path, "entry": figures[-1], "across": entry})
         out.append(entry)
     return out

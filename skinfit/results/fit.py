@@ -32,6 +32,7 @@ from skinfit.io.priors import PriorSet
 from skinfit.io.provenance import input_lines, inputs_of
 from skinfit.posterior import Posterior
 from skinfit.results.intervals import CI_KIND, CI_PROB, check_ci, interval_name
+from skinfit.results.pointwise import RECIPE, Recomputed, recomputable
 from skinfit.results.store import fit_file, read_tree, write_tree
 from skinfit.results.summary import (
     SUMMARY_ATTR,
@@ -71,7 +72,9 @@ class Fit:
     log-likelihood and predictive draws) and the check of the fit to the data, and
     :attr:`idata` and :meth:`group` of those groups raise a RuntimeError naming
     :meth:`complete`. No property computes anything, checks anything or warns; a loaded fit's
-    pointwise groups are read from its file when first used (:attr:`idata`, :meth:`group`).
+    pointwise groups are computed again from its draws (:mod:`skinfit.results.pointwise`), or
+    read from a file of an earlier skinfit that holds them, when first used (:attr:`idata`,
+    :meth:`group`).
     """
 
     def __init__(self, idata, posterior=None, *, pointwise=None, stored=None, path=None):
@@ -95,8 +98,8 @@ class Fit:
 
     @property
     def idata(self):
-        """The complete ArviZ DataTree (a loaded fit's pointwise groups read from its file on
-        first use); RuntimeError for a :attr:`pending` fit."""
+        """The complete ArviZ DataTree (a loaded fit's pointwise groups computed again or read
+        from its file on first use); RuntimeError for a :attr:`pending` fit."""
         self._require_complete("idata")
         return self._read_stored()._tree
 
@@ -124,7 +127,9 @@ class Fit:
         return self
 
     def _read_stored(self):
-        """The fit, with the groups of :data:`DEFERRED` of a loaded fit read from its file."""
+        """The fit, with the groups of :data:`DEFERRED` of a loaded fit computed again from its
+        draws (:class:`~skinfit.results.pointwise.Recomputed`) or read from its file
+        (:class:`~skinfit.results.store.StoredGroups`)."""
         if self._stored is not None:
             self._tree, self._stored = self._stored.read(self._tree), None
         return self
@@ -327,13 +332,23 @@ class Fit:
         return "\n".join(lines)
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the fit as NetCDF, atomically (temporary file + rename), with every group (a
-        pending fit is completed first) and the sha256 of each group and of the root attributes
-        (:mod:`skinfit.io.integrity`), which :func:`load_fit` checks.  ``path`` is the file (a
-        directory, a device such as /dev/null or a FIFO there is refused first)."""
+        """Write the fit as NetCDF, atomically (temporary file + rename), with the sha256 of each
+        group and of the root attributes (:mod:`skinfit.io.integrity`), which :func:`load_fit`
+        checks.  A pending fit is completed first.  Every group is written but those of
+        :data:`DEFERRED` of a fit that records how to compute them again, of a model that ships
+        with skinfit (:func:`skinfit.results.pointwise.recomputable`: nine tenths of the bytes,
+        computed again on first use after :func:`load_fit`); a plug-in's or a user's model's fit,
+        and one loaded from a file that holds them (saved by an earlier skinfit), keeps them.
+        ``path`` is the file (a directory, a device such as /dev/null or a FIFO there is refused
+        first)."""
         path = check_output_file(path, "Fit.save", "path", "fit")
         path.parent.mkdir(parents=True, exist_ok=True)
-        tree = self.complete()._tree
+        if self.pending:
+            self.complete()
+        leave_out = recomputable(self._tree)
+        if not leave_out:  # an earlier skinfit's fit, or a plug-in's model: the groups are saved with it
+            self._read_stored()
+        tree = self._tree
         schema = tree.attrs.get(integrity.SCHEMA_ATTR)
         if not isinstance(schema, (int, np.integer)) or schema < integrity.CHECKED_SCHEMA:  # an older file saved again
             tree.attrs[integrity.SCHEMA_ATTR] = integrity.CHECKED_SCHEMA  # (before its summary's key is computed)
@@ -343,7 +358,14 @@ class Fit:
             tree.attrs.pop(SUMMARY_ATTR, None)
             warnings.warn(f"{self.model_id} on {self.dataset_id}: saved without its summary table "
                           f"({type(exc).__name__}: {exc}); it is computed when read", UserWarning, stacklevel=2)
-        return write_tree(tree, path)
+        written = tree
+        if leave_out:
+            written = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
+                                            | {n: tree[n].to_dataset(inherit=False) for n in tree.children
+                                               if n not in DEFERRED})
+        write_tree(written, path)
+        tree.attrs[integrity.RECORD] = written.attrs[integrity.RECORD]  # the fit in memory as it is read back
+        return path
 
     def _repr_html_(self) -> str:
         """Notebook view: model and data, the seed, the convergence verdict with its reasons,
@@ -368,16 +390,21 @@ class Fit:
 def load_fit(path: str | os.PathLike) -> Fit:
     """Load a fit saved by :meth:`Fit.save` (``path``: the file, or its run directory).
 
-    The groups of :data:`DEFERRED` (pointwise log-likelihood and predictive draws, most of a
-    file) are read when first used (:attr:`Fit.idata`, :meth:`Fit.group`, :meth:`Fit.complete`),
-    from the same file: if it has been replaced or changed meanwhile, that read raises
-    InputError rather than mix two results.  The file's checksums are checked as each part is
-    read (:mod:`skinfit.io.integrity`)."""
+    The groups of :data:`DEFERRED` (pointwise log-likelihood and predictive draws) are made
+    when first used (:attr:`Fit.idata`, :meth:`Fit.group`, :meth:`Fit.complete`): computed
+    again from the draws, data and seed in the file, bit for bit those of the fit that was
+    saved (:mod:`skinfit.results.pointwise`; InputError when this skinfit's model gives other
+    numbers), or, for a file of an earlier skinfit that holds them, read from it (InputError if
+    it has been replaced or changed meanwhile, rather than mix two results).  The file's
+    checksums are checked as each part is read (:mod:`skinfit.io.integrity`)."""
     path = fit_file(path)
     tree, stored = read_tree(path, later=DEFERRED)
     if "model_id" not in tree.attrs:
         raise InputError(path, "not a skinfit result (no model_id attribute)")
-    return Fit(tree, stored=stored, path=path)
+    fit = Fit(tree, stored=stored, path=path)
+    if stored is None and RECIPE in tree.attrs:  # computed again from the draws on first use
+        fit._stored = Recomputed(path, lambda: fit.posterior)
+    return fit
 
 
 def as_fit(obj, where="fit", field=None) -> Fit:

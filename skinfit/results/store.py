@@ -3,7 +3,8 @@
 
 :func:`write_tree` writes atomically (temporary file + rename) with xarray; :func:`read_tree`
 reads, with h5netcdf, the groups but those named ``later`` (a fit's pointwise groups, most of a
-file), which :class:`StoredGroups` reads from the same file when they are first used. Each group
+file an earlier skinfit wrote; :mod:`skinfit.results.pointwise` computes them for the files
+written now), which :class:`StoredGroups` reads from the same file when they are first used. Each group
 becomes an xarray Dataset as ``xarray.open_datatree`` gives it (:func:`decoded`); a file of
 another layout (variables at its root, nested groups) is read whole by ``xarray.open_datatree``.
 """

@@ -11,7 +11,6 @@ versions, seed, MAP, optimiser status, sampler record and guard rails.
 
 import json
 import time
-import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import metadata
@@ -27,6 +26,7 @@ from skinfit.io import integrity
 from skinfit.io.labels import annotate, level_labels, noise_suffix
 from skinfit.io.units import si_unit
 from skinfit.results.fit import GROUPS
+from skinfit.results.pointwise import RECIPE, make_recipe, pointwise_tree
 
 __all__ = ["build_tree", "Pointwise", "versions", "known_se_record"]
 
@@ -133,16 +133,8 @@ class Pointwise:
     def groups(self, post, every=1, walker_step=1):
         """The ``log_likelihood`` and ``posterior_predictive`` groups as a DataTree, each
         variable (chain, draw, obs_id); with ``every`` or ``walker_step`` > 1 on those draws
-        only (``chain`` / ``draw`` coordinates kept)."""
-        ll, simulated = post.replicate(self.draws(every, walker_step), np.random.default_rng(self.seed))
-        chains, kept = np.arange(self.nwalkers)[::walker_step], np.arange(self.ndraws)[::every]
-        shape = (len(chains), len(kept), post.n)
-        with warnings.catch_warnings():  # one draw of a few walkers is meant (memory thinning)
-            warnings.filterwarnings("ignore", "Found chain dimension to be longer than draw")
-            return from_dict({"log_likelihood": {o: v.reshape(shape) for o, v in ll.items()},
-                              "posterior_predictive": {o: v.reshape(shape) for o, v in simulated.items()}},
-                             dims={o: ["obs_id"] for o in post.observables},
-                             coords={"obs_id": np.arange(post.n), "chain": chains, "draw": kept})
+        only (``chain`` / ``draw`` coordinates kept): :func:`~skinfit.results.pointwise.pointwise_tree`."""
+        return pointwise_tree(post, self.theta, self.nwalkers, self.ndraws, self.seed, every, walker_step)
 
     def complete(self, tree, post):
         """``tree`` (of :func:`build_tree`, for Posterior ``post``) with the pointwise groups in
@@ -158,10 +150,11 @@ class Pointwise:
         every, walker_step, note = pointwise_thinning(post, self.nwalkers, self.ndraws)
         where = f"{tree.attrs['model_id']} on {tree.attrs['dataset_id']}"
         messages = [(f"{where}: {note}", UserWarning)] if note else []
-        extra = annotate(self.groups(post, every, walker_step), post)
+        extra = self.groups(post, every, walker_step)
         nodes = {n: tree[n] for n in tree.children} | {n: extra[n] for n in extra.children}
         tree = xr.DataTree.from_dict({"/": tree.to_dataset(inherit=False)}
                                      | {n: nodes[n].to_dataset(inherit=False) for n in sorted(nodes, key=GROUPS.index)})
+        tree.attrs[RECIPE] = make_recipe(self.seed, every, walker_step, extra)  # what Fit.save writes instead
         if note:
             tree.attrs["pointwise_thinned"] = json.dumps({"every": every, "walker_step": walker_step, "note": note})
         t1 = time.perf_counter()

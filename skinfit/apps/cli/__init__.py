@@ -197,7 +197,9 @@ def build_parser():
     s.add_argument("--checkpoint-every", type=_positive_float, default=30.0, metavar="SECONDS",
                    help="seconds between checkpoints (OUT/checkpoint.h5) while sampling (default 30)")
     s.add_argument("--strict", action="store_true", help="exit non-zero if not converged or warned")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--quiet", action="store_true",
+                   help="no progress (else a bar up to the next convergence check on a terminal, a line per check "
+                        "in a log)")
     s.add_argument("--json", action="store_true", help="print the result as JSON (summary, seed, warnings)")
     s.add_argument("--ci", type=_ci, default=None, metavar="PROB", help=_CI_HELP)
     s.set_defaults(func=_command("skinfit.apps.cli.fit"))
