@@ -295,3 +295,33 @@ def test_hdf5_matrix_dataset_reads_as_the_mat_file(tmp_path, transposed):
     assert len(h5) == len(mat) == 6
     for col in ("normal_force", "tangential_force", "normal_force_se", "speed", "start_time"):
         np.testing.assert_allclose(h5[col], mat[col], rtol=1e-12)
+
+
+def test_every_trial_rejected_review_still_written(tmp_path, capsys):
+    """All trials off target: the review page and trials.csv are written, then one line names the
+    page and the command exits 2; an earlier run's dataset in the folder is removed, not left stale."""
+    rng = np.random.default_rng(23)
+    files, _ = _trials(tmp_path, rng, 2, off_target=(0, 1))
+    (tmp_path / "good").mkdir()
+    good, _ = _trials(tmp_path / "good", rng, 1)
+    rig = str(write(tmp_path, RIG))
+    out = tmp_path / "ds"
+    assert main(["ingest", str(good[0]), "--rig", rig, "--out", str(out)]) == 0
+    assert (out / "dataset.toml").exists()
+    assert main(["ingest", *map(str, files), "--rig", rig, "--out", str(out), "--review", "--overwrite"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no trial kept, no dataset written: 2 of 2 trial(s) rejected (first: " in err
+    assert f"review page {out / 'review' / 'index.html'} and in {out / 'trials.csv'}" in err
+    page = (out / "review" / "index.html").read_text()
+    assert "No trial kept: all 2 trial(s) rejected" in page and page.count("<img") == 2
+    assert page.count("% off the target 0.5 N") >= 2
+    assert (out / "trials.csv").read_text().count(",rejected,") == 2
+    assert not (out / "dataset.toml").exists() and not (out / "data.csv").exists()
+    # Python: the same error after the page; without review the reasons are in the message
+    with pytest.raises(InputError, match=r"no trial kept.*review page .*index\.html") as info:
+        skinfit.ingest(files, rig, out=tmp_path / "py", review=True)
+    assert "\n" not in str(info.value) and (tmp_path / "py" / "review" / "index.html").exists()
+    with pytest.raises(InputError, match=rf"no trial kept, no dataset written \({files[0].stem}: mean normal_force"):
+        skinfit.ingest(files, rig)
+    with pytest.raises(InputError, match=r"review: the review page is written into the dataset folder"):
+        skinfit.ingest(files, rig, review=True)
