@@ -325,3 +325,34 @@ def test_every_trial_rejected_review_still_written(tmp_path, capsys):
         skinfit.ingest(files, rig)
     with pytest.raises(InputError, match=r"review: the review page is written into the dataset folder"):
         skinfit.ingest(files, rig, review=True)
+
+
+def test_shared_bias_part_of_the_standard_error(tmp_path):
+    """``normal_force_se_bias`` is the se of the bias subtracted (mean of the first 0.5 s, shared
+    by the trial's strokes): calibrated against the bias's actual error, computed from the
+    simulated truth (the at-rest samples' mean), and the remaining part against each stroke's own
+    error; with 0.5 s of bias and ~1 s strokes the shared part is most of the variance."""
+    rng = np.random.default_rng(29)
+    files, truth, bias_err = [], {}, {}
+    for k in range(14):
+        sig, strokes = stroke_recording(rng, lengths=rng.uniform(0.5, 1.5, 6))
+        path = tmp_path / f"S1_0V_{k}.mat"
+        scipy.io.savemat(path, {"data": rig_volts(sig)})
+        files.append(path)
+        truth[path.stem] = np.array([s["normal_force"] for s in strokes])
+        bias_err[path.stem] = np.mean(sig["normal_force"][:5000])  # finger off: all of it is the bias's error
+    ing = run_ingest(files, write(tmp_path, RIG.split("[reject]")[0]))
+    frame = ing.dataset.frame
+    z_bias, z_own, share = [], [], []
+    for name, g in frame.groupby("recording"):
+        se, se_bias = g.normal_force_se.to_numpy(), g.normal_force_se_bias.to_numpy()
+        assert np.ptp(se_bias) == 0  # one bias per trial (first window only)
+        z_bias.append(bias_err[name] / se_bias[0])
+        own = g.normal_force.to_numpy() - truth[name] + bias_err[name]  # the stroke's error less the bias's
+        z_own += list(own / np.sqrt(se**2 - se_bias**2))
+        share += list(se_bias**2 / se**2)
+    z_bias, z_own = np.array(z_bias), np.array(z_own)
+    assert abs(z_bias.mean()) < 0.7 and 0.5 < z_bias.std() < 1.6, (z_bias.mean(), z_bias.std())  # 14 trials
+    assert abs(z_own.mean()) < 0.45 and 0.75 < z_own.std() < 1.4, (z_own.mean(), z_own.std())  # 84 strokes
+    assert 0.4 < np.median(share) < 0.8  # bench/results/ingest_bias_share.md: 0.60-0.63
+    assert ing.dataset.column("normal_force_se_bias").unit == "N"

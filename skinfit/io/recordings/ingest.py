@@ -135,8 +135,9 @@ def _stroke(record, rig, buf, off, a, b, sign, names, rectify, chunker):
     row = {"direction": direction, "start_time": ka / rate, "duration": (kb - ka) / rate, "n_samples": kb - ka}
     row.update(reduce_window(piece, names, rectify, max(int(rate // (5 * rig.lowpass)), 1)))
     bias_se = chunker.bias_se((ka + kb) / 2 / rate)
-    for name in names:
-        row[f"{name}_se"] = float(np.hypot(row[f"{name}_se"], bias_se.get(name, 0.0)))
+    for name in names:  # the bias's part kept apart too: shared by the trial's strokes, not independent
+        row[f"{name}_se_bias"] = float(bias_se.get(name, 0.0))
+        row[f"{name}_se"] = float(np.hypot(row[f"{name}_se"], row[f"{name}_se_bias"]))
     record.rows.append(row)
 
 
@@ -177,7 +178,7 @@ def _frame(records, rig, names):
         for s in r.rows:
             rows.append({"recording": r.name, **{k: r.metadata.get(k, "") for k in meta}, **s})
     order = ["recording", *meta, "direction", "start_time", "duration", "n_samples", "n_eff"]
-    order += [c for n in names for c in (n, f"{n}_se")] + ["speed", "speed_se"]
+    order += [c for n in names for c in (n, f"{n}_se", f"{n}_se_bias")] + ["speed", "speed_se"]
     return pd.DataFrame(rows, columns=order), meta
 
 
@@ -195,9 +196,9 @@ def _columns(frame, rig, meta):
              Column("duration", "duration", "s", "quantity"), Column("n_samples", "n_samples", "1", "quantity"),
              Column("n_eff", "n_eff", "1", "quantity")]
     for name in frame.columns[len(cols):]:
-        base = name[:-3] if name.endswith("_se") else name
+        base = re.sub(r"_se(_bias)?$", "", name)
         unit = "m/s" if base == "speed" else derived[base][1]
-        signed = not name.endswith("_se") and bool((frame[name] < 0).any())
+        signed = base == name and bool((frame[name] < 0).any())
         cols.append(Column(name, name, unit, "quantity", signed=signed))
     return tuple(cols)
 
