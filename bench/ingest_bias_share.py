@@ -20,10 +20,10 @@ import numpy as np
 import scipy.io
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from recordings import ISSUE_RIG, rig_volts, stroke_recording  # noqa: E402
-from test_ingest import RIG  # noqa: E402
+from recordings import ISSUE_RIG, rig_volts, stroke_recording
+from test_ingest import RIG
 
-from skinfit.io.recordings.ingest import run_ingest  # noqa: E402
+from skinfit.io.recordings.ingest import run_ingest
 
 
 def main(n_trials=40):

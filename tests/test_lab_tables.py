@@ -370,7 +370,7 @@ def test_a_comma_that_may_be_a_thousands_mark_is_not_guessed(tmp_path, capsys):
     """``1,234`` with no number in the file settling the mark (every comma followed by three
     digits, no decimal point) is 1.234 or 1234: an error naming the first such cell, until the
     decimal mark is given; one number such as ``0,5`` or ``0,250`` settles it."""
-    raw = "# RigSoft\nsubject;Fn (mN);Ft (mN)\nS1;1,234;500\nS1;2,500;1,250\n".encode()
+    raw = b"# RigSoft\nsubject;Fn (mN);Ft (mN)\nS1;1,234;500\nS1;2,500;1,250\n"
     with pytest.raises(InputError, match=r"^x\.csv: column 'Fn \(mN\)', row 3: '1,234' reads as 1\.234 with a decimal "
                        r"comma or as 1234 with a thousands separator, .*give the decimal mark \(--decimal ','") as info:
         read_lab_table(raw, "x.csv")
