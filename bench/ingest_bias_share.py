@@ -60,7 +60,7 @@ def main(n_trials=40):
                 print(f"- {name}: bias share of se^2 median {share.median():.2f} (5-95%: {share.quantile(0.05):.2f}"
                       f"-{share.quantile(0.95):.2f}); se_bias/se median {np.sqrt(share).median():.2f}; "
                       f"within-trial error correlation measured {rho:.2f} (predicted by se_bias^2/se^2 {pred:.2f}); "
-                      f"variance of a trial's {m}-stroke mean {effect:.1f} x what independent rows give")
+                      f"variance of a trial's {m}-stroke mean 1 + {m - 1} x share = {effect:.1f} x what independent rows give")
 
 
 if __name__ == "__main__":
