@@ -54,14 +54,13 @@ def write_review(ingestion, folder):
     return index
 
 
-def ingest_with_review(files, rig, out, *, review=False, chunk_seconds=None):
+def ingest_with_review(files, rig, out, *, review=False):
     """(:class:`~skinfit.io.recordings.ingest.Ingestion`, path of the review page or None) of
     :func:`ingest`; with ``review`` the page ``out/review/index.html`` is written before the
     InputError of an ingestion that kept no trial is raised, that error then naming the page."""
     if review and out is None:
         raise InputError("review", "the review page is written into the dataset folder: give out= (a folder)")
-    extra = {} if chunk_seconds is None else {"chunk_seconds": chunk_seconds}
-    ing = run_ingest(files, rig, out, traces=review, strict=not review, **extra)
+    ing = run_ingest(files, rig, out, traces=review, strict=not review)
     page = write_review(ing, Path(out) / "review") if review else None
     if ing.error is not None:
         rejected = ing.trials[0]
