@@ -18,7 +18,7 @@ _PUBLIC = {
     "Model": "skinfit.io.models", "load_model": "skinfit.io.models", "list_models": "skinfit.io.models",
     "PriorSet": "skinfit.io.priors", "load_priors": "skinfit.io.priors", "list_priors": "skinfit.io.priors",
     "Dataset": "skinfit.io.data", "load_dataset": "skinfit.io.data", "list_datasets": "skinfit.io.data",
-    "ingest": "skinfit.io.recordings.ingest",
+    "ingest": "skinfit.report.review",
     "truncate": "skinfit.io.user_priors",
     # fitting and its result
     "fit": "skinfit.results.fitting", "Fit": "skinfit.results.fit", "load_fit": "skinfit.results.fit",

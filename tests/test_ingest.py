@@ -295,3 +295,64 @@ def test_hdf5_matrix_dataset_reads_as_the_mat_file(tmp_path, transposed):
     assert len(h5) == len(mat) == 6
     for col in ("normal_force", "tangential_force", "normal_force_se", "speed", "start_time"):
         np.testing.assert_allclose(h5[col], mat[col], rtol=1e-12)
+
+
+def test_every_trial_rejected_review_still_written(tmp_path, capsys):
+    """All trials off target: the review page and trials.csv are written, then one line names the
+    page and the command exits 2; an earlier run's dataset in the folder is removed, not left stale."""
+    rng = np.random.default_rng(23)
+    files, _ = _trials(tmp_path, rng, 2, off_target=(0, 1))
+    (tmp_path / "good").mkdir()
+    good, _ = _trials(tmp_path / "good", rng, 1)
+    rig = str(write(tmp_path, RIG))
+    out = tmp_path / "ds"
+    assert main(["ingest", str(good[0]), "--rig", rig, "--out", str(out)]) == 0
+    assert (out / "dataset.toml").exists()
+    assert main(["ingest", *map(str, files), "--rig", rig, "--out", str(out), "--review", "--overwrite"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no trial kept, no dataset written: 2 of 2 trial(s) rejected (first: " in err
+    assert f"review page {out / 'review' / 'index.html'} and in {out / 'trials.csv'}" in err
+    page = (out / "review" / "index.html").read_text()
+    assert "No trial kept: all 2 trial(s) rejected" in page and page.count("<img") == 2
+    assert page.count("% off the target 0.5 N") >= 2
+    assert (out / "trials.csv").read_text().count(",rejected,") == 2
+    assert not (out / "dataset.toml").exists() and not (out / "data.csv").exists()
+    # Python: the same error after the page; without review the reasons are in the message
+    with pytest.raises(InputError, match=r"no trial kept.*review page .*index\.html") as info:
+        skinfit.ingest(files, rig, out=tmp_path / "py", review=True)
+    assert "\n" not in str(info.value) and (tmp_path / "py" / "review" / "index.html").exists()
+    with pytest.raises(InputError, match=rf"no trial kept, no dataset written \({files[0].stem}: mean normal_force"):
+        skinfit.ingest(files, rig)
+    with pytest.raises(InputError, match=r"review: the review page is written into the dataset folder"):
+        skinfit.ingest(files, rig, review=True)
+
+
+def test_shared_bias_part_of_the_standard_error(tmp_path):
+    """``normal_force_se_bias`` is the se of the bias subtracted (mean of the first 0.5 s, shared
+    by the trial's strokes): calibrated against the bias's actual error, computed from the
+    simulated truth (the at-rest samples' mean), and the remaining part against each stroke's own
+    error; with 0.5 s of bias and ~1 s strokes the shared part is most of the variance."""
+    rng = np.random.default_rng(29)
+    files, truth, bias_err = [], {}, {}
+    for k in range(14):
+        sig, strokes = stroke_recording(rng, lengths=rng.uniform(0.5, 1.5, 6))
+        path = tmp_path / f"S1_0V_{k}.mat"
+        scipy.io.savemat(path, {"data": rig_volts(sig)})
+        files.append(path)
+        truth[path.stem] = np.array([s["normal_force"] for s in strokes])
+        bias_err[path.stem] = np.mean(sig["normal_force"][:5000])  # finger off: all of it is the bias's error
+    ing = run_ingest(files, write(tmp_path, RIG.split("[reject]")[0]))
+    frame = ing.dataset.frame
+    z_bias, z_own, share = [], [], []
+    for name, g in frame.groupby("recording"):
+        se, se_bias = g.normal_force_se.to_numpy(), g.normal_force_se_bias.to_numpy()
+        assert np.ptp(se_bias) == 0  # one bias per trial (first window only)
+        z_bias.append(bias_err[name] / se_bias[0])
+        own = g.normal_force.to_numpy() - truth[name] + bias_err[name]  # the stroke's error less the bias's
+        z_own += list(own / np.sqrt(se**2 - se_bias**2))
+        share += list(se_bias**2 / se**2)
+    z_bias, z_own = np.array(z_bias), np.array(z_own)
+    assert abs(z_bias.mean()) < 0.7 and 0.5 < z_bias.std() < 1.6, (z_bias.mean(), z_bias.std())  # 14 trials
+    assert abs(z_own.mean()) < 0.45 and 0.75 < z_own.std() < 1.4, (z_own.mean(), z_own.std())  # 84 strokes
+    assert 0.4 < np.median(share) < 0.8  # bench/results/ingest_bias_share.md: 0.60-0.63
+    assert ing.dataset.column("normal_force_se_bias").unit == "N"

@@ -364,3 +364,24 @@ def test_a_workbook_named_csv_is_read_as_one_and_its_card_rereads_it(lab, tmp_pa
     card = write_card(ds, tmp_path / "run" / "dataset")  # as skinfit fit writes it beside a result
     assert 'format = "xlsx"' in card.read_text()
     _check_values(load_dataset(card.parent), lab)
+
+
+def test_a_comma_that_may_be_a_thousands_mark_is_not_guessed(tmp_path, capsys):
+    """``1,234`` with no number in the file settling the mark (every comma followed by three
+    digits, no decimal point) is 1.234 or 1234: an error naming the first such cell, until the
+    decimal mark is given; one number such as ``0,5`` or ``0,250`` settles it."""
+    raw = b"# RigSoft\nsubject;Fn (mN);Ft (mN)\nS1;1,234;500\nS1;2,500;1,250\n"
+    with pytest.raises(InputError, match=r"^x\.csv: column 'Fn \(mN\)', row 3: '1,234' reads as 1\.234 with a decimal "
+                       r"comma or as 1234 with a thousands separator, .*give the decimal mark \(--decimal ','") as info:
+        read_lab_table(raw, "x.csv")
+    assert "\n" not in str(info.value)
+    table = read_lab_table(raw, "x.csv", {"decimal": ","})
+    assert list(table.cells["Fn (mN)"]) == ["1.234", "2.500"] and list(table.cells["Ft (mN)"]) == ["500", "1.250"]
+    for settling in ("0,250", "12,25", "1234,567", "1,5e-3"):  # not a thousands grouping: the comma is decimal
+        table = read_lab_table(raw.replace(b"500\n", settling.encode() + b"\n"), "x.csv")
+        assert table.read["decimal"] == "," and table.cells["Fn (mN)"][0] == "1.234"
+    path = tmp_path / "lab.csv"
+    path.write_bytes(raw)
+    assert main(["dataset", "init", str(path), "--model", MODEL, "--out", str(tmp_path / "ds"),
+                 "--column", "Ft (mN)=tangential_force", "--column", "Fn (mN)=normal_force"]) == 2
+    assert "lab.csv: column 'Fn (mN)', row 3: '1,234' reads as" in capsys.readouterr().err

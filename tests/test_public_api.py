@@ -33,7 +33,7 @@ FROZEN = {
     'fit_by': '(model, dataset, by, out_dir, *, priors=None, seed=None, split=None, noise=None, progress=False, ess_target=400, max_steps=20000, overwrite=False, writes_card=False, **fit_options)',
     'fit_contrasts': "(fits: 'Mapping[str, Fit]', parameter: 'str', rng: 'int | np.random.Generator | None' = None, prob: 'float' = 0.94, rope=None) -> 'pd.DataFrame'",
     'level_contrasts': "(fit: 'Fit', parameter: 'str', prob: 'float' = 0.94, rope=None) -> 'pd.DataFrame'",
-    'ingest': "(files: 'str | os.PathLike | Sequence[str | os.PathLike]', rig: 'str | os.PathLike', out: 'str | os.PathLike | None' = None) -> 'Dataset'",
+    'ingest': "(files: 'str | os.PathLike | Sequence[str | os.PathLike]', rig: 'str | os.PathLike', out: 'str | os.PathLike | None' = None, *, review: 'bool' = False) -> 'Dataset'",
     'list_datasets': "() -> 'list[str]'",
     'list_models': "() -> 'list[str]'",
     'list_priors': "() -> 'list[str]'",

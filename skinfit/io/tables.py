@@ -8,7 +8,9 @@ Excel ``.xlsx`` is read with openpyxl (the optional extra ``excel``); MATLAB ``.
 files with scipy.io and h5py (:mod:`skinfit.io.vectors`).  The format is told by the file's
 first bytes, so a binary file is never read as text.  Nothing ambiguous is guessed: two
 separators that both split the file evenly, numbers written with both decimal marks, several
-sheets with data are errors naming the file, column and row, with the option that settles it.
+sheets with data, numbers whose comma may be a decimal or a thousands mark (``1,234`` with no
+number in the file that settles it) are errors naming the file, column and row, with the option
+that settles it.
 
 Row numbers are those the user sees: the line of a text file (header and comment lines
 counted), the row of a sheet, the 1-based element of a MATLAB or HDF5 vector.
@@ -324,7 +326,33 @@ def _detect_decimal(header, columns, rows, where):
         raise InputError(where, f"{c2!r} is written with the other decimal mark than {c1!r} (column {h1!r}, row "
                          f"{rows[i1]}): give the decimal mark (--decimal, or decimal in [read])",
                          field=f"column {h2!r}", row=int(rows[i2]))
+    if "," in first:
+        _check_not_thousands(header, columns, rows, where)
     return "," if "," in first else "."
+
+
+# A number a thousands separator may have written: 1-3 digits, not starting with 0, then ",ddd".
+_THOUSANDS = re.compile(r"[+-]?[1-9][0-9]{0,2},[0-9]{3}")
+
+
+def _check_not_thousands(header, columns, rows, where):
+    """InputError when every number written with a comma would also read with ``,`` as a
+    thousands separator (``1,234``: 1.234 or 1234?) and none with a decimal point settles it: the
+    first such cell named.  One cell not of that form (``0,5``, ``12,25``, ``1,5e-3``) settles it."""
+    cells = []
+    for h, col in zip(header, columns):
+        comma = _marks(col)[1]
+        for i in np.flatnonzero(comma):
+            if not _THOUSANDS.fullmatch(col[i]):
+                return
+            cells.append((int(i), h, col[i]))
+    i, h, text = min(cells, key=lambda t: t[0])
+    whole = text.replace(",", "")
+    raise InputError(where, f"{text!r} reads as {text.replace(',', '.')} with a decimal comma or as {whole} with a "
+                     "thousands separator, and no number in the file settles which (every comma has three digits "
+                     "after it, no number has a decimal point): give the decimal mark (--decimal ',' or decimal = "
+                     "\",\" in [read]; thousands separators are not read: export without them)",
+                     field=f"column {h!r}", row=int(rows[i]))
 
 
 def _comma_to_dot(header, column, rows, where):

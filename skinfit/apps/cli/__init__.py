@@ -171,7 +171,8 @@ def build_parser():
     s.add_argument("--rig", required=True, help="the rig file (TOML): channels, gains, filters, strokes")
     s.add_argument("--out", required=True, help="dataset folder to write (data.csv, dataset.toml, trials.csv)")
     s.add_argument("--review", action="store_true", help="also write OUT/review/index.html: each trial's traces, "
-                   "the strokes found and kept, the rejected ones with the reason")
+                   "the strokes found and kept, the rejected ones with the reason (written even when every trial is "
+                   "rejected: then no dataset, exit status 2)")
     s.add_argument("--overwrite", action="store_true", help="replace a dataset already in --out")
     s.add_argument("--json", action="store_true", help="print the outcome as JSON")
     s.set_defaults(func=_command("skinfit.apps.cli.ingest"))

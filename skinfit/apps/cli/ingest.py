@@ -1,11 +1,13 @@
-"""``skinfit ingest RAW... --rig RIG.toml --out DIR [--review]``: raw recordings -> a per-stroke dataset."""
+"""``skinfit ingest RAW... --rig RIG.toml --out DIR [--review]``: raw recordings -> a per-stroke dataset.
+
+With ``--review`` the page is written even when every trial is rejected; the command then exits
+non-zero with one line naming the page (no dataset written)."""
 
 import json
 from pathlib import Path
 
 from skinfit.errors import InputError
-from skinfit.io.recordings.ingest import run_ingest
-from skinfit.report.review import write_review
+from skinfit.report.review import ingest_with_review
 
 __all__ = ["run"]
 
@@ -14,10 +16,7 @@ def run(args):
     out = Path(args.out)
     if (out / "dataset.toml").exists() and not args.overwrite:
         raise InputError(args.out, "holds a dataset already (pass --overwrite to replace it)", field="--out")
-    ing = run_ingest(args.raw, args.rig, out, traces=args.review)
-    for old in (out / "review").glob("trial_*.png") if args.review else ():  # figures of an earlier run
-        old.unlink()
-    review = write_review(ing, out / "review") if args.review else None
+    ing, review = ingest_with_review(args.raw, args.rig, out, review=args.review)
     kept = [t for t in ing.trials if t.kept]
     if args.json:
         print(json.dumps({"dataset": str(out), "rows": len(ing.dataset), "review": str(review) if review else None,

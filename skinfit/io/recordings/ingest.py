@@ -1,4 +1,4 @@
-"""``skinfit.ingest``: raw recordings + a rig file -> a dataset folder, one row per stroke.
+"""The ingestion behind ``skinfit.ingest``: raw recordings + a rig file -> a dataset folder, one row per stroke.
 
 Each trial is read and filtered by chunks (:class:`skinfit.io.recordings.signal.Chunker`);
 strokes are found on the filtered velocity and normal force; a stroke still open at a chunk's
@@ -6,8 +6,11 @@ end is carried into the next (its samples only), so memory holds one chunk plus 
 Each kept window becomes a row (:func:`skinfit.io.recordings.strokes.reduce_window`).  A trial
 off its target (the rig's ``[reject]``) or without strokes is rejected with its reason; every
 trial and every dropped stroke is listed in ``trials.csv`` and the card's provenance: nothing is
-dropped silently.  The card records each raw file's sha256, the rig file's sha256 and text, and
-the pipeline's settings.
+dropped silently.  When every trial is rejected no dataset is written (``data.csv`` and
+``dataset.toml`` of an earlier run in the folder are removed), ``trials.csv`` still is, and the
+error is raised, or with ``strict=False`` returned in :attr:`Ingestion.error` so that the caller
+writes the review page first (:func:`skinfit.report.review.ingest`).  The card records each
+raw file's sha256, the rig file's sha256 and text, and the pipeline's settings.
 """
 
 from __future__ import annotations
@@ -20,7 +23,6 @@ import json
 import os
 import re
 import tempfile
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -37,7 +39,7 @@ from skinfit.io.recordings.rig import Rig, load_rig
 from skinfit.io.recordings.signal import Chunker
 from skinfit.io.recordings.strokes import reduce_window, runs, window
 
-__all__ = ["ingest", "run_ingest", "Ingestion", "TrialRecord", "CHUNK_SECONDS"]
+__all__ = ["run_ingest", "Ingestion", "TrialRecord", "CHUNK_SECONDS"]
 
 #: Seconds of samples filtered at once (60 s at 10 kHz: 600 000 samples a channel).
 CHUNK_SECONDS = 60.0
@@ -66,12 +68,15 @@ class TrialRecord:
 
 @dataclass
 class Ingestion:
-    """The result of :func:`run_ingest`: the dataset (kept trials' strokes) and every trial's record."""
+    """The result of :func:`run_ingest`: the dataset (kept trials' strokes) and every trial's
+    record; with no trial kept (``strict=False``) ``dataset`` is None and ``error`` the
+    InputError saying so, for the caller to raise once the review page is written."""
 
-    dataset: Dataset
+    dataset: Dataset | None
     trials: list
     rig: Rig
     folder: Path | None
+    error: InputError | None = None
 
 
 def _signal_names(rig):
@@ -130,8 +135,9 @@ def _stroke(record, rig, buf, off, a, b, sign, names, rectify, chunker):
     row = {"direction": direction, "start_time": ka / rate, "duration": (kb - ka) / rate, "n_samples": kb - ka}
     row.update(reduce_window(piece, names, rectify, max(int(rate // (5 * rig.lowpass)), 1)))
     bias_se = chunker.bias_se((ka + kb) / 2 / rate)
-    for name in names:
-        row[f"{name}_se"] = float(np.hypot(row[f"{name}_se"], bias_se.get(name, 0.0)))
+    for name in names:  # the bias's part kept apart too: shared by the trial's strokes, not independent
+        row[f"{name}_se_bias"] = float(bias_se.get(name, 0.0))
+        row[f"{name}_se"] = float(np.hypot(row[f"{name}_se"], row[f"{name}_se_bias"]))
     record.rows.append(row)
 
 
@@ -172,7 +178,7 @@ def _frame(records, rig, names):
         for s in r.rows:
             rows.append({"recording": r.name, **{k: r.metadata.get(k, "") for k in meta}, **s})
     order = ["recording", *meta, "direction", "start_time", "duration", "n_samples", "n_eff"]
-    order += [c for n in names for c in (n, f"{n}_se")] + ["speed", "speed_se"]
+    order += [c for n in names for c in (n, f"{n}_se", f"{n}_se_bias")] + ["speed", "speed_se"]
     return pd.DataFrame(rows, columns=order), meta
 
 
@@ -190,9 +196,9 @@ def _columns(frame, rig, meta):
              Column("duration", "duration", "s", "quantity"), Column("n_samples", "n_samples", "1", "quantity"),
              Column("n_eff", "n_eff", "1", "quantity")]
     for name in frame.columns[len(cols):]:
-        base = name[:-3] if name.endswith("_se") else name
+        base = re.sub(r"_se(_bias)?$", "", name)
         unit = "m/s" if base == "speed" else derived[base][1]
-        signed = not name.endswith("_se") and bool((frame[name] < 0).any())
+        signed = base == name and bool((frame[name] < 0).any())
         cols.append(Column(name, name, unit, "quantity", signed=signed))
     return tuple(cols)
 
@@ -209,20 +215,12 @@ def _write(records, rig, files, folder, dataset_id):
     names = _signal_names(rig)
     frame, meta = _frame(records, rig, names)
     if frame.empty:
-        reasons = "; ".join(f"{r.name}: {r.reason}" for r in records)
-        raise InputError(display(rig.path), f"no trial kept, no dataset written ({reasons})")
+        return None
     cols = _columns(frame, rig, meta)
     folder.mkdir(parents=True, exist_ok=True)
     data = folder / "data.csv"
     frame.to_csv(data, index=False, float_format="%.10g")
-    with open(folder / "trials.csv", "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(["recording", "file", "status", "reason", "strokes_found", "strokes_kept", "dropped_strokes"])
-        for r in records:
-            dropped = "; ".join(f"{s['direction']} stroke at {s['start'] / r.rate:.3f} s: {s['reason']}"
-                                for s in r.strokes if s["reason"])
-            w.writerow([r.name, Path(r.file).name, "kept" if r.kept else "rejected", r.reason, len(r.strokes),
-                        len(r.rows), dropped])
+    _write_trials(records, folder)
     provenance = {
         "kind": "measured", "note": "per-stroke means from raw recordings by skinfit ingest (rig file below)",
         "source_file": str(data.resolve()), "sha256": _sha256(data),
@@ -241,6 +239,33 @@ def _write(records, rig, files, folder, dataset_id):
     return load_dataset(folder)
 
 
+def _write_trials(records, folder):
+    """``folder/trials.csv``: every trial's status, reason, strokes found and kept, dropped strokes."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "trials.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["recording", "file", "status", "reason", "strokes_found", "strokes_kept", "dropped_strokes"])
+        for r in records:
+            dropped = "; ".join(f"{s['direction']} stroke at {s['start'] / r.rate:.3f} s: {s['reason']}"
+                                for s in r.strokes if s["reason"])
+            w.writerow([r.name, Path(r.file).name, "kept" if r.kept else "rejected", r.reason, len(r.strokes),
+                        len(r.rows), dropped])
+
+
+def _none_kept(records, rig, folder):
+    """The InputError of an ingestion that kept no trial, every trial's reason in it; with an
+    output ``folder``, its ``trials.csv`` written and an earlier run's dataset removed (a stale
+    dataset beside this run's trials.csv would be read as this run's)."""
+    reasons = "; ".join(f"{r.name}: {r.reason}" for r in records)
+    if folder is None:
+        return InputError(display(rig.path), f"no trial kept, no dataset written ({reasons})")
+    _write_trials(records, folder)
+    for old in ("data.csv", "dataset.toml"):
+        (folder / old).unlink(missing_ok=True)
+    return InputError(display(rig.path), f"no trial kept, no dataset written ({reasons}; every trial in "
+                      f"{display(folder / 'trials.csv')})")
+
+
 def _signed(text, cols):
     """The card with ``signed = true`` under each column that holds negative values."""
     for c in cols:
@@ -250,10 +275,12 @@ def _signed(text, cols):
     return text
 
 
-def run_ingest(files, rig, out=None, *, traces=False, chunk_seconds=CHUNK_SECONDS):
+def run_ingest(files, rig, out=None, *, traces=False, chunk_seconds=CHUNK_SECONDS, strict=True):
     """Ingest raw recordings ``files`` (paths) as the rig file ``rig`` (a path or a loaded Rig)
     describes: an :class:`Ingestion` with the dataset and every trial's record; ``traces`` keeps
-    a thinned copy of each trial's signals for the review page."""
+    a thinned copy of each trial's signals for the review page.  With no trial kept: InputError
+    (``out/trials.csv`` written first), or with ``strict=False`` that error in ``Ingestion.error``
+    and ``dataset`` None."""
     if isinstance(files, (str, os.PathLike)):
         files = [files]
     files = [Path(check_input_file(check_path(f, "files", None, "paths of raw recordings"), "raw recording"))
@@ -269,30 +296,22 @@ def run_ingest(files, rig, out=None, *, traces=False, chunk_seconds=CHUNK_SECOND
         for h in handles:
             with contextlib.suppress(Exception):
                 h.close()
-    dataset_id = Path(out).name if out is not None else Path(rig.path).stem
+    dataset_id = _id(Path(out).name if out is not None else Path(rig.path).stem)
+    folder = Path(out) if out is not None else None
     if out is not None:
-        ds = _write(records, rig, files, Path(out), _id(dataset_id))
-        return Ingestion(ds, records, rig, Path(out))
-    with tempfile.TemporaryDirectory() as tmp:
-        ds = _write(records, rig, files, Path(tmp) / "dataset", _id(dataset_id))
-        ds = dataclasses.replace(ds, card_file="", data_file="", path=f"ingest of {Path(rig.path).name}")
-    return Ingestion(ds, records, rig, None)
+        ds = _write(records, rig, files, folder, dataset_id)
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            ds = _write(records, rig, files, Path(tmp) / "dataset", dataset_id)
+            if ds is not None:
+                ds = dataclasses.replace(ds, card_file="", data_file="", path=f"ingest of {Path(rig.path).name}")
+    if ds is None:
+        error = _none_kept(records, rig, folder)
+        if strict:
+            raise error
+        return Ingestion(None, records, rig, folder, error)
+    return Ingestion(ds, records, rig, folder)
 
 
 def _id(text):
     return re.sub(r"[^A-Za-z0-9_.+-]", "_", text).lstrip(".") or "ingested"
-
-
-def ingest(files: str | os.PathLike | Sequence[str | os.PathLike], rig: str | os.PathLike,
-           out: str | os.PathLike | None = None) -> Dataset:
-    """Raw recordings -> a per-stroke :class:`~skinfit.Dataset`.
-
-    ``files``: a path or paths of raw recordings (MATLAB v5/v7.3, HDF5, CSV); ``rig``: the rig
-    file (TOML, docs/from-your-rig.md) stating the channels, units, gains or calibration
-    matrix, bias windows, filters, stroke detection and rejection rule.  Each row is one stroke's
-    kept window: the mean of each channel in SI with ``<name>_se`` (its standard error from the
-    within-window scatter, corrected for autocorrelation) and ``n_eff``, the direction, start
-    time and duration [s], and the trial's metadata.  ``out``: a folder to write the dataset
-    into (``data.csv``, ``dataset.toml``, ``trials.csv``), fitted with ``skinfit fit MODEL OUT``.
-    """
-    return run_ingest(files, rig, out).dataset
