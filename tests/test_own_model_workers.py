@@ -57,7 +57,7 @@ def test_a_function_that_cannot_reach_workers_is_one_line():
     assert "\n" not in str(info.value)
     # a notebook's function unpickled in a spawned worker, whose __main__ does not define it
     with pytest.raises(InputError, match=r"__main__:powerlaw_nb is not defined in this worker process: a function "
-                                         r"of a notebook or script \(__main__\) reaches fork-started workers only"):
+                                         r"defined in a notebook or at a prompt \(__main__\) reaches fork-started workers only"):
         restore_forward("__main__:powerlaw_nb", "", ("tangential_force",), "model from function powerlaw_nb")
 
 

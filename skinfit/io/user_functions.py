@@ -70,10 +70,11 @@ class UserForward:
 
     Pickled (a Model handed to worker processes) as ``ref`` and the sha256 of ``func``'s source:
     the worker imports the function by module and name (:func:`restore_forward`).  A function
-    defined at a module's top level pickles anywhere; one typed in a notebook or script
-    (``__main__``) reaches fork-started workers (they share this process's ``__main__``) but not
-    spawned ones, which say so in one line; a lambda or a function defined inside another one
-    cannot be pickled (an InputError in one line when pickled)."""
+    defined at a module's top level pickles anywhere; one defined in ``__main__`` reaches
+    fork-started workers (they share this process's ``__main__``), and spawned ones only from a
+    script (they run its top level again), not from a notebook or a prompt: those workers say so
+    in one line; a lambda or a function defined inside another one cannot be pickled (an
+    InputError in one line when pickled)."""
 
     def __init__(self, func, observables, ref, where):
         self.func, self.observables, self.ref, self.where = func, observables, ref, where
@@ -119,8 +120,9 @@ def restore_forward(ref, recorded, observables, where):
     module = ref.partition(":")[0]
     func = _found(ref) if module == "__main__" else None
     if func is None and module == "__main__":
-        raise InputError(where, f"{ref} is not defined in this worker process: a function of a notebook or "
-                                f"script (__main__) reaches fork-started workers only; {_BY_NAME}", field="function")
+        raise InputError(where, f"{ref} is not defined in this worker process: a function defined in a notebook "
+                                f"or at a prompt (__main__) reaches fork-started workers only; {_BY_NAME}",
+                         field="function")
     if func is None:
         func = import_function(ref, recorded, where)
     check_source_hash(func, ref, recorded, where)
