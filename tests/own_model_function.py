@@ -22,3 +22,18 @@ def simulate(n_rows, seed, truth=TRUTH):
     p = {k: np.array([[v]]) for k, v in truth.items() if k != "sigma"}
     y = powerlaw_ea(p, x)[0] + rng.normal(0.0, truth["sigma"], n_rows)
     return pd.DataFrame({**x, "tangential_force": y})
+
+
+def fit_medians(model, frame, priors, seed):
+    """Posterior medians of ``skinfit.fit(model, frame, priors=priors, rng=seed)`` (short fits):
+    run in worker processes by tests/test_own_model_workers.py, which hands them the model."""
+    import skinfit
+
+    fit = skinfit.fit(model, frame, priors=priors, rng=seed, ess_target=60, n_global=200)
+    post = fit.idata["posterior"].to_dataset()
+    return {name: float(np.median(post[name].values)) for name in ("k", "kappa", "n", "sigma")}
+
+
+def predict_with(model, params, x):
+    """``model.predict(params, x)``: run in a worker process that is handed the model."""
+    return model.predict(params, x)

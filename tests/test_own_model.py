@@ -121,7 +121,9 @@ def test_a_broken_function_is_one_line(data, func, match):
     ({"mu": st.norm(0.5, 0.1)}, InputError, "a prior for 'mu', which model 'powerlaw_ea' does not have"),
     ({"sigma": None}, InputError, r"no prior for sigma \(model 'powerlaw_ea' needs priors for k, kappa, n, sigma\)"),
     ({"sigma": {"dist": "uniform", "bounds": [0.0, float("inf")]}}, InputError, "improper: give finite bounds"),
-    ({"sigma": st.norm(0.0, 0.1)}, InputError, r"leave the physical range \[0, inf\] of sigma"),
+    ({"sigma": st.norm(0.0, 0.1)}, InputError, r"leave the physical range \[0, inf\] of sigma, a noise scale, "
+                                               r"which cannot be negative: give it a prior on \[0, inf\] .*"
+                                               r"skinfit.truncate\(dist, 0, upper\)\)$"),
     ({"k": st.cauchy(0.5, 1.0)}, InputError, "scipy.stats.cauchy is not a prior family skinfit has"),
     ({"k": st.lognorm}, InputError, "scipy.stats.lognorm is not frozen"),
     ({"k": 0.5}, InputError, "expected a frozen scipy.stats distribution"),

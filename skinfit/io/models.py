@@ -101,6 +101,12 @@ class Model:
             return resolve("forward", self.forward_ref, self.path)
         return self.function if self.function is not None else user_forward(self)
 
+    def __getstate__(self):
+        """Pickled (a Model handed to worker processes) with its read-only tables as dicts that
+        unpickle as read-only tables again; a function model's function by module and name
+        (:class:`skinfit.io.user_functions.UserForward`)."""
+        return {k: _picklable(v) for k, v in self.__dict__.items()}
+
     @classmethod
     def from_function(cls, func, *, observable, covariates, parameters, id=None, title=None, source=None) -> Model:
         """A model whose forward model is the Python function ``func(p, x)``.
@@ -226,6 +232,24 @@ class Model:
 
     def __repr__(self):
         return f"Model({self.id!r}, parameters={list(self.parameter_names)})"
+
+
+class _Table(dict):
+    """A read-only table (MappingProxyType) on its way through pickle: it unpickles as one."""
+
+    def __reduce__(self):
+        return _read_only, (dict(self),)
+
+
+def _read_only(table):
+    return MappingProxyType(table)
+
+
+def _picklable(value):
+    """``value`` with each MappingProxyType in it (nested ones too) a :class:`_Table`."""
+    if isinstance(value, MappingProxyType):
+        return _Table({k: _picklable(v) for k, v in value.items()})
+    return value
 
 
 def _quantities(doc, key, where, *, observable=False):

@@ -264,8 +264,19 @@ def check_physical(model, priors, noise_names):
         prior = priors[name]
         if prior.lower < lo or prior.upper > hi:
             raise InputError(priors.path or "priors", f"bounds [{prior.lower:g}, {prior.upper:g}] leave the "
-                             f"physical range [{lo:g}, {hi:g}] of {name} declared by model {model.id!r} "
-                             f"(its card, [[parameters]] physical)", field=f"{name}.bounds")
+                             f"physical range [{lo:g}, {hi:g}] of {name}, {_range_origin(model, name, noise_names)}",
+                             field=f"{name}.bounds")
+
+
+def _range_origin(model, name, noise_names):
+    """Where the range :func:`check_physical` holds ``name`` to comes from, and what to do."""
+    if name in noise_names:
+        what = "a noise scale" if name.startswith("sigma") else "a Student-t's degrees of freedom"
+        return (f"{what}, which cannot be negative: give it a prior on [0, inf] (a half-normal or log-normal, "
+                "or bounds = [0, ...]; in Python skinfit.truncate(dist, 0, upper))")
+    if model.file:
+        return f"declared by model {model.id!r} in its card {model.file} ([[parameters]] physical)"
+    return f"declared by model {model.id!r} (its [[parameters]] physical)"
 
 
 def prior_groups(priors):

@@ -22,15 +22,17 @@ import hashlib
 import importlib
 import inspect
 import json
+import sys
 from collections.abc import Mapping
 
 import numpy as np
 
 from skinfit.errors import ForwardError, InputError, InputTypeError
 from skinfit.io.arguments import shown
+from skinfit.io.registry import lookup, register
 
-__all__ = ["function_ref", "source_sha256", "adapt", "import_function", "check_source_hash",
-           "function_card"]
+__all__ = ["function_ref", "source_sha256", "adapt", "UserForward", "restore_forward", "import_function",
+           "check_source_hash", "function_card"]
 
 
 def function_ref(func):
@@ -49,26 +51,84 @@ def source_sha256(func):
 
 def adapt(func, observables, ref, where):
     """The forward function ``(p, x, c) -> (y, ok)`` of the user function ``func(p, x)``, whose
-    model has ``observables`` (names): one array is the first observable's, a dict is returned as
-    it is (its keys checked by the caller, :func:`skinfit.io.forward_check.validated`).  An array
-    that is not 2-D is a ForwardError naming ``where`` and ``ref``: parameters come as (k, 1)
-    arrays, so a vectorised function returns (k, n)."""
+    model has ``observables`` (names): a :class:`UserForward`, which pickles (a Model sent to
+    worker processes) with ``func`` by module and name."""
+    return UserForward(func, tuple(observables), ref, where)
 
-    def forward(p, x, c):
-        y = func(p, x)
-        y = dict(y) if isinstance(y, Mapping) else {observables[0]: y}
+
+#: Why a function reaches worker processes only by module and name (see UserForward).
+_BY_NAME = ("a model's function reaches worker processes by module and name: define it at the top level of a "
+            "module (a .py file) and import it from there")
+
+
+class UserForward:
+    """The forward function ``(p, x, c) -> (y, ok)`` of a user's ``func(p, x)`` (:func:`adapt`):
+    one array is the first observable's, a dict is returned as it is (its keys checked by the
+    caller, :func:`skinfit.io.forward_check.validated`).  An array that is not 2-D is a
+    ForwardError naming ``where`` and ``ref``: parameters come as (k, 1) arrays, so a vectorised
+    function returns (k, n).
+
+    Pickled (a Model handed to worker processes) as ``ref`` and the sha256 of ``func``'s source:
+    the worker imports the function by module and name (:func:`restore_forward`).  A function
+    defined at a module's top level pickles anywhere; one defined in ``__main__`` reaches
+    fork-started workers (they share this process's ``__main__``), and spawned ones only from a
+    script (they run its top level again), not from a notebook or a prompt: those workers say so
+    in one line; a lambda or a function defined inside another one cannot be pickled (an
+    InputError in one line when pickled)."""
+
+    def __init__(self, func, observables, ref, where):
+        self.func, self.observables, self.ref, self.where = func, observables, ref, where
+        self.__name__ = getattr(func, "__name__", "forward")
+        self.__wrapped__ = func
+
+    def __call__(self, p, x, c):
+        y = self.func(p, x)
+        y = dict(y) if isinstance(y, Mapping) else {self.observables[0]: y}
         for name, arr in y.items():
             if isinstance(arr, np.ndarray) and arr.ndim != 2:
                 k = max((np.shape(v)[0] for v in p.values() if np.ndim(v)), default=1)
                 n = max((len(v) for v in x.values()), default=1)
-                raise ForwardError(where, f"{ref}: returned {name!r} of shape {arr.shape}; expected ({k}, {n}) = "
-                                          "(parameter draws, data rows): parameters come as (k, 1) arrays, "
-                                          "covariates as (n,)", field="function")
+                raise ForwardError(self.where, f"{self.ref}: returned {name!r} of shape {arr.shape}; expected "
+                                               f"({k}, {n}) = (parameter draws, data rows): parameters come as "
+                                               "(k, 1) arrays, covariates as (n,)", field="function")
         return y, np.True_
 
-    forward.__name__ = getattr(func, "__name__", "forward")
-    forward.__wrapped__ = func
-    return forward
+    def __reduce__(self):
+        if _found(self.ref) is not self.func:
+            raise InputError(self.where, f"{self.ref} cannot be sent to worker processes (a lambda, or a function "
+                                         f"defined inside another one): {_BY_NAME}", field="function")
+        return restore_forward, (self.ref, source_sha256(self.func), self.observables, self.where)
+
+    def __repr__(self):
+        return f"UserForward({self.ref})"
+
+
+def _found(ref):
+    """The object ``ref`` (``module:qualname``) names among the modules imported, or None."""
+    module, _, qualname = ref.partition(":")
+    obj = sys.modules.get(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part, None)
+    return obj
+
+
+def restore_forward(ref, recorded, observables, where):
+    """The :class:`UserForward` of the function ``ref`` (``module:qualname``) in a worker
+    process (unpickling one), its source checked against the ``recorded`` sha256, and the
+    function registered (role ``function``) as :meth:`~skinfit.Model.from_function` does; one
+    line when the worker cannot import it (a notebook's function in a spawned worker)."""
+    module = ref.partition(":")[0]
+    func = _found(ref) if module == "__main__" else None
+    if func is None and module == "__main__":
+        raise InputError(where, f"{ref} is not defined in this worker process: a function defined in a notebook "
+                                f"or at a prompt (__main__) reaches fork-started workers only; {_BY_NAME}",
+                         field="function")
+    if func is None:
+        func = import_function(ref, recorded, where)
+    check_source_hash(func, ref, recorded, where)
+    if lookup("function", ref) in (None, "register()"):
+        register("function", ref, func, replace=True)
+    return UserForward(func, tuple(observables), ref, where)
 
 
 _REFIT = "predictions would not be those of the model fitted; restore the function, or refit"

@@ -12,7 +12,7 @@ import numpy as np
 from skinfit.analysis.design.problem import n_candidates, take_x
 from skinfit.analysis.sbc import design_dataset
 from skinfit.errors import InputError
-from skinfit.io.data import load_dataset
+from skinfit.io.data import as_dataset
 from skinfit.io.models import Model
 
 __all__ = ["baseline_design", "MIN_DRAWS", "MAX_BYTES", "MAX_SECONDS", "check_counts", "check_params",
@@ -21,18 +21,18 @@ __all__ = ["baseline_design", "MIN_DRAWS", "MAX_BYTES", "MAX_SECONDS", "check_co
 
 def baseline_design(model, fit, baseline, n, units):
     """SI covariates of the baseline plan: ``n`` rows evenly spaced over the fit's own dataset,
-    the model's shipped dataset, or ``baseline`` (a dataset id / path)."""
+    the model's shipped dataset, or ``baseline`` (a dataset id / path, a DataFrame)."""
     if baseline is None and fit is not None:
         x, label = fit.posterior.x, f"fit's dataset {fit.dataset_id}"
     else:
         try:
-            ds = load_dataset(baseline) if baseline is not None else design_dataset(model)
+            ds = as_dataset(baseline, model=model) if baseline is not None else design_dataset(model)
         except InputError as exc:
             if baseline is not None or exc.field != "dataset":
                 raise
             raise InputError(f"model {model.id}", "no shipped dataset for this model or its variants to take the "
                              "baseline design from: give one with --baseline DATASET (baseline= in Python), a "
-                             "dataset id or path", field="baseline") from None
+                             "dataset id or path, or a DataFrame in Python", field="baseline") from None
         missing = [c.name for c in model.covariates if c.name not in ds.frame.columns and not c.optional]
         if missing:
             raise InputError(ds.path, f"baseline dataset has no covariate {missing[0]!r} of model {model.id!r}")

@@ -37,17 +37,20 @@ from skinfit.analysis.design.result import DesignResult, user_frame
 from skinfit.analysis.evidence import posterior_draws
 from skinfit.errors import InputError, InputTypeError
 from skinfit.io.arguments import as_generator
+from skinfit.io.data import Dataset
 from skinfit.io.labels import noise_suffix
 from skinfit.io.models import Model, load_model
-from skinfit.io.priors import load_priors
+from skinfit.io.priors import PriorSet, list_priors, load_priors
+from skinfit.io.user_priors import as_prior_set
 from skinfit.results.fit import Fit
 
-__all__ = ["design"]
+__all__ = ["design", "model_priors"]
 
 
 def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapping, n: int = 24,
            params: Sequence[str] | None = None, rng: int | np.random.Generator | None = None, *,
-           discriminate: Sequence[str | Model] = (), baseline: str | None = None, noise_scale: float | None = None,
+           discriminate: Sequence[str | Model] = (), baseline: str | os.PathLike | pd.DataFrame | None = None,
+           noise_scale: float | None = None, priors: str | os.PathLike | PriorSet | Mapping | None = None,
            n_outer: int = 400, n_inner: int = 400, n_batch: int = 200, n_draws: int = 4000) -> DesignResult:
     """Which ``n`` measurements to make next, from the candidates, to learn most about ``params``.
 
@@ -67,12 +70,16 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
     discriminate : list of model ids
         Competing models: the plan then maximises the expected ln Bayes factor of the generating
         model against its best competitor (see :func:`discrimination_plan`).
-    baseline : dataset id or path, optional
+    baseline : dataset id or path, or a DataFrame (SI), optional
         Design to compare with (default: the fit's dataset, else the model's shipped dataset),
-        ``n`` rows evenly spaced.
+        ``n`` rows evenly spaced.  A model of one's own (:meth:`~skinfit.Model.from_function`)
+        has no shipped dataset: give its data here.
     noise_scale : float or mapping observable -> float, optional
         Noise sd in the likelihood's space (N for a normal tangential force, log units for a
         log-normal one); default the fit's posterior median, else the prior's median.
+    priors : PriorSet, prior file id or path, or mapping name -> scipy.stats distribution, optional
+        A model's priors (as :func:`skinfit.fit` takes them; default its prior file); a model
+        made from a Python function has none, so needs them here.  Not with a fit (its own).
 
     Returns
     -------
@@ -92,6 +99,9 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
         if post.split:
             raise InputError(f"fit of {model.id}", f"design from a fit with split parameters "
                              f"({', '.join(post.split)}) is not supported: fit them shared")
+        if priors is not None:
+            raise InputError("design", "priors= applies to a model; a fit's priors are those it was fitted with",
+                             field="priors")
         priors = post.priors
         noise_kinds = dict(post.noise)
     else:
@@ -99,14 +109,14 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
             raise InputTypeError("fit_or_model", f"expected a Fit, a Model or a model id (got "
                                  f"{type(fit_or_model).__name__})")
         model = fit_or_model if isinstance(fit_or_model, Model) else load_model(fit_or_model)
-        priors = load_priors(model.id)
+        priors = model_priors(model, priors)
         noise_kinds = {o.name: o.noise for o in model.observables}
     names = model.parameter_names
     params = check_params(params, model)
     discriminate = check_discriminate(discriminate, model)
     check_noise_scale(noise_scale, model)
-    if baseline is not None and not isinstance(baseline, (str, os.PathLike)):
-        raise InputError("--baseline", f"expected a dataset id or path (got {type(baseline).__name__})")
+    if baseline is not None and not isinstance(baseline, (str, os.PathLike, pd.DataFrame, Dataset)):
+        raise InputError("--baseline", f"expected a dataset id or path, or a DataFrame (got {type(baseline).__name__})")
     targets = list(names) if params is None else params
     if isinstance(candidates, (str, os.PathLike)) or (
             isinstance(candidates, dict) and {"grid", "points"} & set(candidates)):
@@ -253,3 +263,15 @@ def design(fit_or_model: str | Model | Fit, candidates: str | os.PathLike | Mapp
             "xscale": model.plot.get("xscale", "linear")}
     return DesignResult(model.id, tuple(covs), units, table, plan, baseline_frame, comparison, sd, settings,
                         disc_table, plot)
+
+
+def model_priors(model, priors):
+    """The PriorSet :func:`design` draws a model's parameters from: ``priors`` as
+    :func:`skinfit.fit` takes them, else the model's prior file; a model made from a Python
+    function without one is an InputError saying to pass ``priors=``."""
+    if isinstance(priors, Mapping):
+        return as_prior_set(priors, model, "design")
+    if priors is None and model.user_function and model.id not in list_priors():
+        raise InputError("design", f"model {model.id!r} was made from a Python function and has no prior file: pass "
+                                   "priors={name: scipy.stats distribution} (sigma for the noise too)", field="priors")
+    return priors if isinstance(priors, PriorSet) else load_priors(model.id if priors is None else priors)
