@@ -682,3 +682,18 @@ def test_panel_titles_wrap_to_the_laid_out_width_and_keep_numbers_with_their_uni
         assert any(line.endswith(("= 0 " + unit, "= 1.2 " + unit)) for line in lines), lines
     third = Figure(figsize=(6.0, 4), layout="constrained").subplots(1, 3)[0]  # ~21 characters a line
     assert style.wrap_title("E_skin_micro: contraction 1.00", third) == "E_skin_micro:\ncontraction 1.00"
+
+
+@pytest.mark.parametrize("columns", [1, 4, 8])
+def test_a_mathtext_unit_in_a_wrapped_label_is_never_cut(columns):
+    """A label wrapped to a narrow panel keeps each ``$...$`` whole: a cut one is drawn as its
+    TeX source (seen in the forest of beta_z0 [N·s/m/N^n_z] at four panels a row)."""
+    from skinfit.plots.reading import param_label
+
+    fig = style.new_figure(8, 3)
+    ax = fig.subplots(1, columns, squeeze=False)[0, 0]
+    text = style.wrap_title(param_label("beta_z0_with_a_long_name", "N*s/m/N^n_z"), ax, 7)
+    assert all(line.count("$") % 2 == 0 for line in text.split("\n")), text
+    assert text.replace("\n", " ").split() == param_label("beta_z0_with_a_long_name", "N*s/m/N^n_z").split()
+    ax.set_xlabel(text)
+    fig.canvas.draw()  # mathtext that does not parse raises here

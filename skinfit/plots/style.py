@@ -67,7 +67,8 @@ def wrap_title(text, ax, fontsize=MIN_FONT + 1):
     constrained layout the width is the axes' share of the figure less ~0.8 in of outer
     margins and 0.1 in between panels (the default subplot margins it has before the layout
     runs are wider, and wrapped "angle = 0 deg" as "angle = 0" / "deg"); a number is never
-    parted from the words on either side ("= 0 deg", "contraction 1.00")."""
+    parted from the words on either side ("= 0 deg", "contraction 1.00"), and a mathtext unit
+    (``$...$``) is never broken: a piece of one would be drawn as its source text."""
     fig, spec = ax.figure, ax.get_subplotspec()
     if spec is not None and isinstance(fig.get_layout_engine(), matplotlib.layout_engine.ConstrainedLayoutEngine):
         width_in = (fig.get_figwidth() - 0.8) * len(spec.colspan) / spec.get_gridspec().ncols - 0.1
@@ -75,7 +76,9 @@ def wrap_title(text, ax, fontsize=MIN_FONT + 1):
         width_in = ax.get_position().width * fig.get_figwidth()
     per_line = max(12, int(width_in * 72 / (0.6 * fontsize)))
     bound = re.sub(r"(?<=\S) (?=[-+]?\.?\d)|(?<=\d) (?=\S)", "\u00a0", text)  # a number stays with its neighbours
-    return "\n".join(w for line in bound.split("\n") for w in textwrap.wrap(line, per_line)).replace("\u00a0", " ")
+    bound = re.sub(r"\$[^$]*\$", lambda m: m.group(0).replace(" ", "\u00a0"), bound)  # mathtext: one piece
+    return "\n".join(w for line in bound.split("\n")
+                     for w in textwrap.wrap(line, per_line, break_long_words="$" not in line)).replace("\u00a0", " ")
 
 
 def log_ticks(ax, which="x", numticks=5, sparse=False):
