@@ -202,7 +202,7 @@ def _call(fn, name, value, fit):
 
 
 def _valid(key, value):
-    if value is None and key == ("run_sbc", "n_rows"):  # optional: every row
+    if value is None and key in (("run_sbc", "n_rows"), ("fit", "nwalkers")):  # optional: every row; the default
         return True
     if key in COUNTS:
         lo, hi, huge = COUNTS[key]
@@ -259,7 +259,8 @@ def test_class_huge_counts_refused_with_a_size_estimate(kwargs, match):
     ({"noise": 3}, r"noise: expected a noise model name or a mapping"),
     ({"constants": [1, 2]}, r"constants: expected a mapping constant name -> number"),
     ({"units": "mN"}, r"units: expected a mapping column -> unit"),
-    ({"priors": ""}, r"expected a PriorSet, a prior file id or the path of a prior file \(got ''\)"),
+    ({"priors": ""}, r"expected a PriorSet, a mapping parameter -> scipy.stats distribution, a prior file id or the path "
+                     r"of a prior file \(got ''\)"),
     ({"nwalkers": 7}, r"nwalkers: expected at least 2 walkers per sampled parameter, 8 for the 4 of this fit"),
 ])
 def test_class_wrong_settings_of_fit_refused_before_the_map(kwargs, match):
