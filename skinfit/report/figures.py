@@ -54,11 +54,12 @@ def split_parameters(fit):
             if set(post[v].dims) - {"chain", "draw"}}
 
 
-def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
+def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where="", ci_prob=CI_PROB):
     """The figure jobs of one fit's section, each with its report ``entry`` (file, PDF, caption,
     alt text): ``fit`` is fit number ``index``, its files named ``key``; ``n_of_model`` fits of
     its model in the report (from :data:`MANY_FITS` on, each fit's section draws only its
-    predictive check: the parameters are compared across the fits in one forest plot each)."""
+    predictive check: the parameters are compared across the fits in one forest plot each). The
+    forests draw and name the HDI at the report's ``ci_prob``, part of their jobs' keys."""
     jobs = []
     for name, make, caption in FIGURES if n_of_model < MANY_FITS else FIGURES[:1]:
         path = figdir / f"{key}_{name}.png"
@@ -68,9 +69,10 @@ def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
     for pname, dims in split_parameters(fit).items():
         path = figdir / f"{key}_forest_{pname}.png"
         entry = {"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
-                 "caption": f"{pname} per {dims}: posterior mean and {interval_name(CI_PROB)}",
+                 "caption": f"{pname} per {dims}: posterior mean and {interval_name(ci_prob)}",
                  "alt": f"forest plot of {pname} per {dims} ({where})"}
-        jobs.append({"fit": index, "func": "plot_forest", "args": (pname,), "path": path, "entry": entry})
+        jobs.append({"fit": index, "func": "plot_forest", "args": (pname,), "kwargs": {"ci_prob": ci_prob},
+                     "path": path, "entry": entry})
     return jobs
 
 

@@ -180,7 +180,7 @@ def population_section(result, ci_prob=CI_PROB):
     Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
     "hyperprior_table": DataFrame, "sampler", "sampler_text", "effects": DataFrame or None,
     "warnings": [text], "origin": the file read or "", "correlation": the correlation prior or
-    None, "intervals": {parameter: the population distribution's median and 94% range}}.
+    None, "intervals": {parameter: the population distribution's median and central ``ci_prob`` range}}.
     """
     view = result if isinstance(result, PopulationView) else PopulationView(result, ci_prob)
     hyper = view.hyper_table().set_index(["parameter", "quantity"])
@@ -525,11 +525,12 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
             if pop is not None:
                 pops[pname] = pop
         path = figdir / f"across_{safe}.png"  # every parameter side by side, one panel each, the fits as rows
-        caption = (f"{', '.join(pnames)} across {len(group)} fits (a panel each)"
-                   + (f"; population distribution of {', '.join(pops)}" if pops else ""))
+        caption = (f"{', '.join(pnames)} across {len(group)} fits (a panel each): posterior mean and "
+                   f"{interval_name(ci_prob)}" + (f"; population distribution of {', '.join(pops)} "
+                                                  f"(median, central {100 * ci_prob:g}%)" if pops else ""))
         figures.append({"file": f"figures/{path.name}", "caption": caption,
                         "alt": f"forest plots of {', '.join(pnames)} across the fits of {model_id}"})
-        jobs.append({"fit": labels, "func": "plot_forest", "args": (pnames,), "kwargs": {"population": pops},
-                     "path": path, "entry": figures[-1], "across": entry})
+        jobs.append({"fit": labels, "func": "plot_forest", "args": (pnames,),
+                     "kwargs": {"population": pops, "ci_prob": ci_prob}, "path": path, "entry": figures[-1], "across": entry})
         out.append(entry)
     return out
