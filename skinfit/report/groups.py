@@ -531,6 +531,7 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
         figures.append({"file": f"figures/{path.name}", "caption": caption,
                         "alt": f"forest plots of {', '.join(pnames)} across the fits of {model_id}"})
         jobs.append({"fit": labels, "func": "plot_forest", "args": (pnames,),
-                     "kwargs": {"population": pops, "ci_prob": ci_prob}, "path": path, "entry": figures[-1], "across": entry})
+                     "kwargs": {"population": pops, "ci_prob": ci_prob}, "path": path, "entry": figures[-1],
+                     "across": entry})
         out.append(entry)
     return out
