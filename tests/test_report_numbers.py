@@ -13,6 +13,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 import pytest
 
 import skinfit
@@ -384,3 +385,29 @@ def test_the_printed_summary_is_rounded_as_the_report(short_fits):
     assert len(rows) == len(short_fits[0].summary())
     assert too_precise([numeric, *rows]) == []
     assert too_precise([numeric, [*rows[0][:2], "37012.345", *rows[0][3:]]]) != []  # the check reads these rows
+
+
+def test_population_rows_name_their_unit_in_display_units():
+    """The population table's unit column: natural rows in the card's display unit (values
+    scaled), mu of a log coordinate as ln of that unit (shifted by ln 1000 for kPa), its tau
+    and correlations dimensionless, no unit written in ASCII."""
+    from skinfit.report.tables import cells, population_units
+
+    hyper = pd.DataFrame({"quantity": ["median", "mu", "tau", "mu", "tau", "corr"],
+                          "estimate": [2e5, math.log(2e5), 0.3, 3e-7, 1e-7, 0.2],
+                          "sd": [1e4, 0.05, 0.02, 1e-8, 1e-8, 0.1],
+                          "lower": [1.8e5, math.log(1.8e5), 0.27, 2.8e-7, 0.8e-7, 0.0],
+                          "upper": [2.2e5, math.log(2.2e5), 0.33, 3.2e-7, 1.2e-7, 0.4],
+                          "coordinate": ["natural", "log", "log", "natural", "natural", "population"]},
+                         index=pd.Index(["E", "E", "E", "a", "a", "E,a"], name="parameter"))
+    shown = population_units(hyper, {"E": "kPa"}, {"E": "Pa", "a": "m^2/N^m"})
+    assert list(shown.columns[:2]) == ["quantity", "unit"]
+    assert [str(u) for u in shown["unit"]] == ["kPa", "ln(kPa)", "-", "m²/N<sup>m</sup>", "m²/N<sup>m</sup>", "-"]
+    np.testing.assert_allclose(shown["estimate"], [200, math.log(200), 0.3, 3e-7, 1e-7, 0.2], rtol=1e-12)
+    np.testing.assert_allclose(shown["sd"], [10, 0.05, 0.02, 1e-8, 1e-8, 0.1], rtol=1e-12)
+    np.testing.assert_allclose(shown["upper"][:2], [220, math.log(220)], rtol=1e-12)
+    assert np.allclose(hyper["estimate"].iloc[0], 2e5)  # the table given (and its CSV) unchanged
+    table = cells(shown, "parameter")
+    assert ascii_units([{"rows": [table["columns"]] + [[re.sub(r"<[^>]+>", "", c) for c in r]
+                                                       for r in table["rows"]]}]) == []
+    assert ascii_units([{"rows": [["p", "unit"], ["a", "m^2/N^m"]]}]) == ["m^2/N^m"]  # the checker sees ASCII

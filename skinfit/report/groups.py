@@ -28,7 +28,16 @@ from skinfit.errors import InputError
 from skinfit.io.labels import parameter_units
 from skinfit.io.units import to_si
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
-from skinfit.report.tables import base_name, cells, display_unit_map, file_part, not_applicable, unique_name, unit_cell
+from skinfit.report.tables import (
+    base_name,
+    cells,
+    display_unit_map,
+    file_part,
+    not_applicable,
+    population_units,
+    unique_name,
+    unit_cell,
+)
 from skinfit.results.intervals import CI_PROB, interval_columns, interval_name
 from skinfit.results.run_labels import run_labels
 from skinfit.results.summary import is_estimate_column
@@ -497,6 +506,7 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
                 pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
             hyper = pop_info["hyper"].reset_index().set_index("parameter")
             hyper = hyper[shown_population_rows(hyper)]  # rows equal to another: in the CSV alone
+            hyper = population_units(hyper, display, si_units)  # in the card's display units, each row's unit named
             derived = hyper["quantity"].isin(DERIVED)  # computed from mu and tau
             pop_tables = {"hyper": cells(hyper, "parameter",
                                          not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),
