@@ -259,7 +259,8 @@ def test_ci_option_changes_every_interval_and_is_recorded(short_fits, tmp_path, 
     job = next(j for j in forests if j["fit"] == 1)
     fig = plots.plot_forest(split, *job["args"], **job["kwargs"])
     try:
-        draws = split.group("posterior")[job["args"][0]]
+        assert job["args"] == (["alpha"],)
+        draws = split.group("posterior")["alpha"]
         level_dim = next(d for d in draws.dims if d not in ("chain", "draw"))
         expected = sorted(hdi(draws.isel({level_dim: k}).values, 0.9) for k in range(draws.sizes[level_dim]))
         segments = fig.axes[0].collections[0].get_segments()
@@ -411,3 +412,27 @@ def test_population_rows_name_their_unit_in_display_units():
     assert ascii_units([{"rows": [table["columns"]] + [[re.sub(r"<[^>]+>", "", c) for c in r]
                                                        for r in table["rows"]]}]) == []
     assert ascii_units([{"rows": [["p", "unit"], ["a", "m^2/N^m"]]}]) == ["m^2/N^m"]  # the checker sees ASCII
+
+
+def test_a_fits_parameters_split_by_one_column_share_one_forest_figure(tmp_path):
+    """Parameters split by the same column are drawn side by side (one job, a panel each), one
+    split by another column apart; the forest's caption names the report's interval."""
+    import xarray as xr
+
+    from skinfit.report.figures import fit_figure_jobs
+
+    def var(*dims):
+        return (("chain", "draw", *dims), np.zeros((2, 3) + (2,) * len(dims)))
+
+    post = xr.Dataset({"alpha": var("voltage"), "c": var(), "beta": var("voltage"), "gamma": var("speed")})
+
+    class Stub:
+        def group(self, name):
+            return post
+
+    jobs = fit_figure_jobs(Stub(), 0, "k", tmp_path, n_of_model=5, where="here", ci_prob=0.8)
+    forests = [j for j in jobs if j["func"] == "plot_forest"]
+    assert [j["args"] for j in forests] == [(["alpha", "beta"],), (["gamma"],)]
+    assert [j["path"].name for j in forests] == ["k_forest_voltage.png", "k_forest_gamma.png"]
+    assert forests[0]["entry"]["caption"] == "alpha, beta per voltage (a panel each): posterior mean and 80% HDI"
+    assert all(j["kwargs"] == {"ci_prob": 0.8} for j in forests)
