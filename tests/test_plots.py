@@ -287,7 +287,7 @@ def test_forest_ticks_are_plain_numbers_with_the_power_in_the_unit():
     fig = plots.plot_forest({"x": table.iloc[[0]], "y": table.iloc[[1]]}, "a", unit="m^2/N^m")
     fig.canvas.draw()
     ax = fig.axes[0]
-    assert ax.get_xlabel() == "a [10⁻⁹ m^2/N^m]" and not ax.xaxis.get_offset_text().get_text()
+    assert ax.get_xlabel() == "a [10⁻⁹ m²/Nᵐ]" and not ax.xaxis.get_offset_text().get_text()
     lo, hi = ax.get_xlim()
     ticks = [v for v in ax.get_xticks() if lo <= v <= hi]
     assert min(ticks) >= 100 and max(ticks) <= 400 and len(ticks) >= 3

@@ -73,6 +73,14 @@ def test_report_on_subjects_shows_tables_population_and_contrasts(subject_fits, 
     assert derived_rows.any() and (~derived_rows).any()
     assert (hyper.loc[derived_rows.to_numpy(), diag] == "n/a").all().all()
     assert not hyper.loc[(~derived_rows).to_numpy(), diag].isin(["n/a", "nan"]).any().any()
+    # each population row names its unit as a physicist writes it; mu of a log coordinate: ln(unit)
+    from test_report_numbers import ascii_units
+
+    (raw,) = [t for (kind, _), t in page.tables.items() if kind == "population"]
+    assert "unit" in raw["rows"][0] and ascii_units([raw]) == []
+    a0 = hyper.loc["alpha_a0"].set_index("quantity")["unit"]
+    assert a0["median"] == "m²/Nm" and a0["mu"] == "ln(m²/Nm)" and a0["tau"] == "-"  # the cells' text
+    assert "ln(m²/N<sup>m</sup>)" in html  # the exponent set as one
     summaries = [_frame(t) for (kind, _), t in page.tables.items() if kind == "summary"]
     assert len(summaries) == len(SUBJECTS)
     for table in summaries:

@@ -11,14 +11,18 @@ import warnings
 from html.parser import HTMLParser
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 import pytest
 
 import skinfit
+from skinfit import plots
 from skinfit.io.labels import round_to_sd, sd_resolution
 from skinfit.io.units import pretty_unit
 from skinfit.report import html as report
-from skinfit.results.intervals import interval_columns
+from skinfit.report.figures import job_keys
+from skinfit.results.intervals import hdi, interval_columns
 
 
 class _Tables(HTMLParser):
@@ -220,14 +224,54 @@ def test_one_interval_probability_named_in_the_whole_report(written):
     assert interval_probabilities((written.parent / "summary.md").read_text(encoding="utf-8")) == {94.0}
 
 
-def test_ci_option_changes_every_interval_and_is_recorded(short_fits, tmp_path, no_figures):
-    """Every table and its text at 90%; the figures (skinfit.plots, drawn at the default 94%
-    until they take the setting) say so in their own captions."""
-    index = _write(short_fits, tmp_path / "ci90", ci_prob=0.9)
-    text = re.sub(r"<figcaption>.*?</figcaption>", "", index.read_text(encoding="utf-8"), flags=re.S)
-    assert interval_probabilities(text) == {90.0} and 'data-ci="0.9"' in text
+def _jobs_of(fits, out, monkeypatch, **kwargs):
+    """The figure jobs a report hands to render_figures (nothing drawn), and its index."""
+    seen = []
+
+    def drawn(fits, jobs, figdir, workers=None, meanwhile=None):
+        seen.extend(jobs)
+        seen.extend(meanwhile() if meanwhile is not None else [])
+        return [None] * len(seen)
+
+    monkeypatch.setattr(report, "render_figures", drawn)
+    return _write(fits, out, **kwargs), seen
+
+
+def test_ci_option_changes_every_interval_and_is_recorded(short_fits, tmp_path, monkeypatch):
+    """Every table, its text and every figure's caption at 90%; the forest of the split
+    parameter draws the 90% HDI of the draws, and its figure's key changes with the setting (a
+    report at 0.9 into a folder drawn at 0.94 draws it again)."""
+    index, jobs = _jobs_of(short_fits, tmp_path / "ci90", monkeypatch, ci_prob=0.9)
+    text = index.read_text(encoding="utf-8")
+    assert interval_probabilities(text) == {90.0} and 'data-ci="0.9"' in text and "94%" not in text
     summary = next(t for t in _tables(index) if t["kind"] == "summary")["rows"][0]
     assert list(interval_columns(0.9)) == ["hdi_5%", "hdi_95%"] and "hdi_5%" in summary
+    forests = [j for j in jobs if j["func"] == "plot_forest"]
+    assert forests and all(j["kwargs"]["ci_prob"] == 0.9 for j in forests)
+    assert all("90% HDI" in j["entry"]["caption"] for j in forests)
+    _, jobs94 = _jobs_of(short_fits, tmp_path / "ci94", monkeypatch)
+    fits = list(short_fits)
+    keys = dict(zip((j["path"].name for j in jobs), job_keys(fits, jobs)))
+    keys94 = dict(zip((j["path"].name for j in jobs94), job_keys(fits, jobs94)))
+    assert all(keys[j["path"].name] != keys94[j["path"].name] for j in forests)
+
+    split = short_fits[1]
+    job = next(j for j in forests if j["fit"] == 1)
+    fig = plots.plot_forest(split, *job["args"], **job["kwargs"])
+    try:
+        assert job["args"] == (["alpha"],)
+        draws = split.group("posterior")["alpha"]
+        level_dim = next(d for d in draws.dims if d not in ("chain", "draw"))
+        expected = sorted(hdi(draws.isel({level_dim: k}).values, 0.9) for k in range(draws.sizes[level_dim]))
+        segments = fig.axes[0].collections[0].get_segments()
+        drawn = sorted((s[0][0], s[1][0]) for s in segments)  # x of each HDI line's ends (divided by the axis's scale)
+        factor = np.ptp(expected) / np.ptp(drawn)  # the axis's plain-number scale: a power of ten
+        assert math.isclose(math.log10(factor), round(math.log10(factor)), abs_tol=1e-9)
+        np.testing.assert_allclose(np.array(drawn) * factor, expected, rtol=1e-9)
+        legend = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert any("90% HDI" in t for t in legend) and not any("94" in t for t in legend)
+    finally:
+        plt.close(fig)
 
 
 def test_units_in_unit_cells_are_written_as_a_physicist_writes_them(written):
@@ -342,3 +386,53 @@ def test_the_printed_summary_is_rounded_as_the_report(short_fits):
     assert len(rows) == len(short_fits[0].summary())
     assert too_precise([numeric, *rows]) == []
     assert too_precise([numeric, [*rows[0][:2], "37012.345", *rows[0][3:]]]) != []  # the check reads these rows
+
+
+def test_population_rows_name_their_unit_in_display_units():
+    """The population table's unit column: natural rows in the card's display unit (values
+    scaled), mu of a log coordinate as ln of that unit (shifted by ln 1000 for kPa), its tau
+    and correlations dimensionless, no unit written in ASCII."""
+    from skinfit.report.tables import cells, population_units
+
+    hyper = pd.DataFrame({"quantity": ["median", "mu", "tau", "mu", "tau", "corr"],
+                          "estimate": [2e5, math.log(2e5), 0.3, 3e-7, 1e-7, 0.2],
+                          "sd": [1e4, 0.05, 0.02, 1e-8, 1e-8, 0.1],
+                          "lower": [1.8e5, math.log(1.8e5), 0.27, 2.8e-7, 0.8e-7, 0.0],
+                          "upper": [2.2e5, math.log(2.2e5), 0.33, 3.2e-7, 1.2e-7, 0.4],
+                          "coordinate": ["natural", "log", "log", "natural", "natural", "population"]},
+                         index=pd.Index(["E", "E", "E", "a", "a", "E,a"], name="parameter"))
+    shown = population_units(hyper, {"E": "kPa"}, {"E": "Pa", "a": "m^2/N^m"})
+    assert list(shown.columns[:2]) == ["quantity", "unit"]
+    assert [str(u) for u in shown["unit"]] == ["kPa", "ln(kPa)", "-", "m²/N<sup>m</sup>", "m²/N<sup>m</sup>", "-"]
+    np.testing.assert_allclose(shown["estimate"], [200, math.log(200), 0.3, 3e-7, 1e-7, 0.2], rtol=1e-12)
+    np.testing.assert_allclose(shown["sd"], [10, 0.05, 0.02, 1e-8, 1e-8, 0.1], rtol=1e-12)
+    np.testing.assert_allclose(shown["upper"][:2], [220, math.log(220)], rtol=1e-12)
+    assert np.allclose(hyper["estimate"].iloc[0], 2e5)  # the table given (and its CSV) unchanged
+    table = cells(shown, "parameter")
+    assert ascii_units([{"rows": [table["columns"]] + [[re.sub(r"<[^>]+>", "", c) for c in r]
+                                                       for r in table["rows"]]}]) == []
+    assert ascii_units([{"rows": [["p", "unit"], ["a", "m^2/N^m"]]}]) == ["m^2/N^m"]  # the checker sees ASCII
+
+
+def test_a_fits_parameters_split_by_one_column_share_one_forest_figure(tmp_path):
+    """Parameters split by the same column are drawn side by side (one job, a panel each), one
+    split by another column apart; the forest's caption names the report's interval."""
+    import xarray as xr
+
+    from skinfit.report.figures import fit_figure_jobs
+
+    def var(*dims):
+        return (("chain", "draw", *dims), np.zeros((2, 3) + (2,) * len(dims)))
+
+    post = xr.Dataset({"alpha": var("voltage"), "c": var(), "beta": var("voltage"), "gamma": var("speed")})
+
+    class Stub:
+        def group(self, name):
+            return post
+
+    jobs = fit_figure_jobs(Stub(), 0, "k", tmp_path, n_of_model=5, where="here", ci_prob=0.8)
+    forests = [j for j in jobs if j["func"] == "plot_forest"]
+    assert [j["args"] for j in forests] == [(["alpha", "beta"],), (["gamma"],)]
+    assert [j["path"].name for j in forests] == ["k_forest_voltage.png", "k_forest_gamma.png"]
+    assert forests[0]["entry"]["caption"] == "alpha, beta per voltage (a panel each): posterior mean and 80% HDI"
+    assert all(j["kwargs"] == {"ci_prob": 0.8} for j in forests)

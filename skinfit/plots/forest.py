@@ -1,6 +1,7 @@
 """A parameter across fits, subjects and conditions, with its population (:func:`plot_forest`)."""
 
 import re
+from statistics import NormalDist
 
 import numpy as np
 import pandas as pd
@@ -22,13 +23,16 @@ from skinfit.plots.style import (
     wrap_title,
 )
 from skinfit.results.fit import Fit, as_fit
+from skinfit.results.intervals import CI_PROB, check_ci, interval_columns, interval_name
 
 __all__ = ["plot_forest"]
 
 
-def _forest_rows(items, parameter):
-    """(label, mean, lo, hi) rows, the parameter's unit and the labels of pooled fits
-    (:func:`_pooled`) from fits and/or summary tables."""
+def _forest_rows(items, parameter, ci_prob=CI_PROB):
+    """(label, mean, lo, hi) rows (the HDI at ``ci_prob``), the parameter's unit and the labels of
+    pooled fits (:func:`_pooled`) from fits and/or summary tables (a table holds that HDI's columns,
+    :func:`~skinfit.results.intervals.interval_columns`)."""
+    lower, upper = interval_columns(ci_prob)
     if isinstance(items, dict):
         pairs = list(items.items())
     else:
@@ -53,12 +57,15 @@ def _forest_rows(items, parameter):
         if not isinstance(item, pd.DataFrame):
             item = as_fit(item)
             unit = unit or parameter_units(item).get(parameter)
-            table = item.summary()
+            table = item.summary(ci_prob)
             post = item.group("posterior")
             dims = ([d for d in post[parameter].dims if d not in ("chain", "draw")]
                     if parameter in post.data_vars else [])
         else:
             table, dims = item, []
+            if not {lower, upper} <= set(table.columns):
+                raise InputError("plot_forest", f"a summary table without the columns {lower!r}, {upper!r} "
+                                                f"of the {interval_name(ci_prob)}")
         for name in table.index:
             m = pattern.match(str(name))
             if not m:
@@ -66,25 +73,29 @@ def _forest_rows(items, parameter):
             level = m.group(2)
             level_text = f"{dims[0]} = {level}" if level is not None and dims else level
             text = " · ".join(t for t in (str(label), level_text) if t) or parameter
-            rows.append((text, float(table.loc[name, "mean"]), float(table.loc[name, "hdi_3%"]),
-                         float(table.loc[name, "hdi_97%"])))
+            rows.append((text, float(table.loc[name, "mean"]), float(table.loc[name, lower]),
+                         float(table.loc[name, upper])))
     pooled = {text for text, *_ in rows if text.split(" · ")[0] in pooled}
     return rows, unit, pooled
 
 
-def _population_interval(spec):
-    """(centre, lo, hi) of a population distribution given as a mapping, draws or a scipy dist."""
+def _population_interval(spec, ci_prob=CI_PROB):
+    """(centre, lo, hi) of a population distribution given as a mapping, draws or a scipy dist:
+    its central ``ci_prob`` range (a mapping's ``lo``/``hi`` as given)."""
+    tail = (1 - ci_prob) / 2
     if hasattr(spec, "ppf"):
-        lo, mid, hi = spec.ppf([0.03, 0.5, 0.97])
+        lo, mid, hi = spec.ppf([tail, 0.5, 1 - tail])
         return float(mid), float(lo), float(hi)
     if isinstance(spec, dict):
         if "mean" in spec and "sd" in spec and not {"lo", "hi"} & set(spec):
             m, sd = float(spec["mean"]), float(spec["sd"])
-            return m, m - 1.881 * sd, m + 1.881 * sd  # central 94% of a normal
+            z = NormalDist().inv_cdf(1 - tail)  # central ci_prob of a normal (1.881 at 0.94)
+            return m, m - z * sd, m + z * sd
+        lower, upper = interval_columns(ci_prob)
         centre = float(spec.get("median", spec.get("mean")))
-        return centre, float(spec.get("lo", spec.get("hdi_3%"))), float(spec.get("hi", spec.get("hdi_97%")))
+        return centre, float(spec.get("lo", spec.get(lower))), float(spec.get("hi", spec.get(upper)))
     draws = np.asarray(spec, dtype=float).ravel()
-    lo, mid, hi = np.quantile(draws, [0.03, 0.5, 0.97])
+    lo, mid, hi = np.quantile(draws, [tail, 0.5, 1 - tail])
     return float(mid), float(lo), float(hi)
 
 
@@ -104,8 +115,8 @@ def _pooled(pairs):
     return {label for label, d in ids.items() if "[" not in d}
 
 
-def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=None):
-    """Posterior mean and 94% HDI of a parameter across fits (subjects, conditions) and levels;
+def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=None, ci_prob=CI_PROB):
+    """Posterior mean and HDI (at ``ci_prob``) of a parameter across fits (subjects, conditions) and levels;
     several parameters side by side, one panel each, sharing the rows.
 
     Parameters
@@ -120,16 +131,22 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
         The population distribution of the parameter (for several: a mapping parameter ->
         distribution), drawn as a band over all rows and a row of its own: a mapping
         (``mean``/``sd``, or ``median``/``lo``/``hi``), an array of population draws, or a
-        frozen scipy.stats distribution (94% central interval).
+        frozen scipy.stats distribution (its central ``ci_prob`` interval).
     unit : str, optional
         Unit for the axis label when only tables are given (fits carry their own).
+    ci_prob : float
+        Probability of the intervals drawn and named in the legend (default 0.94); a summary
+        table given must hold that HDI's columns (``hdi_5%``/``hdi_95%`` at 0.9).
     """
+    ci_prob = check_ci(ci_prob, "plot_forest")
+    ci = interval_name(ci_prob)
+    share = f"{100 * ci_prob:g}%"
     names = [parameter] if isinstance(parameter, str) else list(parameter)
     pops = population if not isinstance(parameter, str) else {parameter: population}
     pops = pops if isinstance(pops, dict) and set(pops) <= set(names) else {n: pops for n in names}
     panels = []
     for name in names:
-        rows, card_unit, pooled = _forest_rows(fits_or_tables, name)
+        rows, card_unit, pooled = _forest_rows(fits_or_tables, name, ci_prob)
         if not rows:
             raise InputError("plot_forest", f"no parameter {name!r} in the given fits or tables")
         panels.append((name, rows, unit or card_unit, pooled, pops.get(name)))
@@ -143,7 +160,7 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
     axes = np.atleast_1d(fig.subplots(nrows, ncols, sharey=True, squeeze=False)).ravel()
     y = {lab: len(order) - 1 - k for k, lab in enumerate(order)}
     for ax, (name, rows, u, pooled, pop) in zip(axes, panels):
-        _forest_panel(ax, name, rows, u, pooled, pop, y)
+        _forest_panel(ax, name, rows, u, pooled, pop, y, ci_prob)
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     axes[0].set_yticks([y[lab] for lab in order], order)
@@ -152,13 +169,13 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
         if pooled_labels or "population" in order:  # the subjects apart from what sums them up
             ax.axhline(y[order[len(subjects)]] + 0.5, color="0.5", lw=0.6)
     axes[0].set_ylim(-0.7, len(order) - 0.3)
-    handles = [Line2D([], [], color=COLOURS[0], marker="o", ms=4, lw=1.6, label="fit: posterior mean, 94% HDI")]
+    handles = [Line2D([], [], color=COLOURS[0], marker="o", ms=4, lw=1.6, label=f"fit: posterior mean, {ci}")]
     if pooled_labels:
         handles.append(Line2D([], [], color="0.45", marker="s", mfc="white", ms=5, lw=1.6,
-                              label="pooled fit (all data): mean, 94% HDI"))
+                              label=f"pooled fit (all data): mean, {ci}"))
     if "population" in order:
-        handles.append(Line2D([], [], color="black", marker="D", ms=5, lw=2.2, label="population: median, 94%"))
-        handles.append(Patch(color="0.6", alpha=0.3, lw=0, label="population 94% band"))
+        handles.append(Line2D([], [], color="black", marker="D", ms=5, lw=2.2, label=f"population: median, {share}"))
+        handles.append(Patch(color="0.6", alpha=0.3, lw=0, label=f"population {share} band"))
     fig.legend(handles=handles, fontsize=MIN_FONT, frameon=False, loc="outside lower center",
                ncols=min(len(handles), 2 if ncols == 1 else 4))
     title = f"{names[0]} across fits and conditions" if len(names) == 1 else "parameters across fits and conditions"
@@ -166,12 +183,12 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
     return finish_figure(fig, path)
 
 
-def _forest_panel(ax, name, rows, unit, pooled, population, y):
+def _forest_panel(ax, name, rows, unit, pooled, population, y, ci_prob=CI_PROB):
     """One parameter's panel: a row per fit (``rows``: label, mean, lo, hi, SI values), the
     pooled fits apart, the population band and row when given; the x axis scaled to plain
     numbers (:func:`~skinfit.plots.style.plain_scale`), its limits holding every interval with a margin."""
     values = np.array([v for r in rows for v in r[1:]], dtype=float)
-    pop = _population_interval(population) if population is not None else None
+    pop = _population_interval(population, ci_prob) if population is not None else None
     if pop is not None:
         values = np.concatenate([values, pop])
     factor, shown = plain_scale(values, unit)

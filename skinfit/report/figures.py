@@ -21,6 +21,7 @@ from skinfit.inference.checkpoint import watch_parent
 from skinfit.inference.workers import forkable
 from skinfit.io.paths import code_hash
 from skinfit.report.figure_folder import SUFFIXES, FigureFolder
+from skinfit.report.tables import file_part
 from skinfit.results.intervals import CI_PROB, interval_name
 
 __all__ = ["FIGURES", "MANY_FITS", "MAX_FIGURE_WORKERS", "fit_figure_jobs", "split_parameters", "job_keys",
@@ -54,23 +55,31 @@ def split_parameters(fit):
             if set(post[v].dims) - {"chain", "draw"}}
 
 
-def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where=""):
+def fit_figure_jobs(fit, index, key, figdir, n_of_model=1, where="", ci_prob=CI_PROB):
     """The figure jobs of one fit's section, each with its report ``entry`` (file, PDF, caption,
     alt text): ``fit`` is fit number ``index``, its files named ``key``; ``n_of_model`` fits of
     its model in the report (from :data:`MANY_FITS` on, each fit's section draws only its
-    predictive check: the parameters are compared across the fits in one forest plot each)."""
+    predictive check: the parameters are compared across the fits in one forest plot each). The
+    parameters split by one column share one forest figure, a panel each (named after the
+    parameter when it is alone, else after the column); the forests draw and name the HDI at the
+    report's ``ci_prob``, part of their jobs' keys."""
     jobs = []
     for name, make, caption in FIGURES if n_of_model < MANY_FITS else FIGURES[:1]:
         path = figdir / f"{key}_{name}.png"
         entry = {"file": f"figures/{path.name}", "caption": caption, "alt": f"{caption} ({where})",
                  "pdf": f"figures/{path.stem}.pdf"}
         jobs.append({"fit": index, "func": make, "args": (), "path": path, "entry": entry})
+    by_dims = {}  # the parameters split by one column side by side, one panel each, sharing its levels' rows
     for pname, dims in split_parameters(fit).items():
-        path = figdir / f"{key}_forest_{pname}.png"
+        by_dims.setdefault(dims, []).append(pname)
+    for dims, pnames in by_dims.items():
+        path = figdir / f"{key}_forest_{file_part(pnames[0] if len(pnames) == 1 else dims)}.png"
+        panels = " (a panel each)" if len(pnames) > 1 else ""
         entry = {"file": f"figures/{path.name}", "pdf": f"figures/{path.stem}.pdf",
-                 "caption": f"{pname} per {dims}: posterior mean and {interval_name(CI_PROB)}",
-                 "alt": f"forest plot of {pname} per {dims} ({where})"}
-        jobs.append({"fit": index, "func": "plot_forest", "args": (pname,), "path": path, "entry": entry})
+                 "caption": f"{', '.join(pnames)} per {dims}{panels}: posterior mean and {interval_name(ci_prob)}",
+                 "alt": f"forest plot of {', '.join(pnames)} per {dims} ({where})"}
+        jobs.append({"fit": index, "func": "plot_forest", "args": (pnames,), "kwargs": {"ci_prob": ci_prob},
+                     "path": path, "entry": entry})
     return jobs
 
 

@@ -28,7 +28,16 @@ from skinfit.errors import InputError
 from skinfit.io.labels import parameter_units
 from skinfit.io.units import to_si
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
-from skinfit.report.tables import base_name, cells, display_unit_map, file_part, not_applicable, unique_name, unit_cell
+from skinfit.report.tables import (
+    base_name,
+    cells,
+    display_unit_map,
+    file_part,
+    not_applicable,
+    population_units,
+    unique_name,
+    unit_cell,
+)
 from skinfit.results.intervals import CI_PROB, interval_columns, interval_name
 from skinfit.results.run_labels import run_labels
 from skinfit.results.summary import is_estimate_column
@@ -180,7 +189,7 @@ def population_section(result, ci_prob=CI_PROB):
     Returns {"parameters", "hyper": DataFrame, "subjects": {parameter: DataFrame}, "hyperpriors",
     "hyperprior_table": DataFrame, "sampler", "sampler_text", "effects": DataFrame or None,
     "warnings": [text], "origin": the file read or "", "correlation": the correlation prior or
-    None, "intervals": {parameter: the population distribution's median and 94% range}}.
+    None, "intervals": {parameter: the population distribution's median and central ``ci_prob`` range}}.
     """
     view = result if isinstance(result, PopulationView) else PopulationView(result, ci_prob)
     hyper = view.hyper_table().set_index(["parameter", "quantity"])
@@ -497,6 +506,7 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
                 pop_info["effects"].to_csv(out_dir / f"population_effects_{safe}.csv", index=False)
             hyper = pop_info["hyper"].reset_index().set_index("parameter")
             hyper = hyper[shown_population_rows(hyper)]  # rows equal to another: in the CSV alone
+            hyper = population_units(hyper, display, si_units)  # in the card's display units, each row's unit named
             derived = hyper["quantity"].isin(DERIVED)  # computed from mu and tau
             pop_tables = {"hyper": cells(hyper, "parameter",
                                          not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),
@@ -525,11 +535,13 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
             if pop is not None:
                 pops[pname] = pop
         path = figdir / f"across_{safe}.png"  # every parameter side by side, one panel each, the fits as rows
-        caption = (f"{', '.join(pnames)} across {len(group)} fits (a panel each)"
-                   + (f"; population distribution of {', '.join(pops)}" if pops else ""))
+        caption = (f"{', '.join(pnames)} across {len(group)} fits (a panel each): posterior mean and "
+                   f"{interval_name(ci_prob)}" + (f"; population distribution of {', '.join(pops)} "
+                                                  f"(median, central {100 * ci_prob:g}%)" if pops else ""))
         figures.append({"file": f"figures/{path.name}", "caption": caption,
                         "alt": f"forest plots of {', '.join(pnames)} across the fits of {model_id}"})
-        jobs.append({"fit": labels, "func": "plot_forest", "args": (pnames,), "kwargs": {"population": pops},
-                     "path": path, "entry": figures[-1], "across": entry})
+        jobs.append({"fit": labels, "func": "plot_forest", "args": (pnames,),
+                     "kwargs": {"population": pops, "ci_prob": ci_prob}, "path": path, "entry": figures[-1],
+                     "across": entry})
         out.append(entry)
     return out

@@ -198,7 +198,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     # two runs of one model on one dataset: named by the options that differ
     labels = dict(zip([k for k, _ in items], run_labels([f for _, f in items])))
     wheres = {key: f"{labels[key]} on {fit.dataset_id}" for key, fit in items}
-    fit_jobs = [fit_figure_jobs(fit, n, key, figdir, per_model[fit.model_id], wheres[key])
+    fit_jobs = [fit_figure_jobs(fit, n, key, figdir, per_model[fit.model_id], wheres[key], ci_prob)
                 for n, (key, fit) in enumerate(items)]
     given = {"comparison": comparison, "population": population, "populations": populations, "contrasts": contrasts,
              "notes": notes}

@@ -17,7 +17,7 @@ from skinfit.results.summary import format_numbers, is_estimate_column
 
 __all__ = ["file_part", "unique_name", "cell_text", "cells", "not_applicable", "markdown", "level_names",
            "base_name", "defang", "break_at_underscores", "ranking_note", "display_unit_map", "display_units",
-           "unit_cell"]
+           "unit_cell", "population_units"]
 
 
 def file_part(text):
@@ -183,4 +183,37 @@ def display_units(shown, fit):
                 out.iloc[i, out.columns.get_loc(c)] /= to_si(unit)
             units[i] = unit
     out["unit"] = [unit_cell(u) for u in units]
+    return out
+
+
+def population_units(hyper, display, si_units):
+    """A population's hyper-parameter rows ``hyper`` (indexed by parameter; ``quantity``,
+    ``coordinate``, ``estimate``, ``sd``, ``lower``, ``upper`` in SI) with a ``unit`` column after
+    ``quantity``, for display (the CSV stays in SI). A row in natural units (mean, sd, median;
+    mu and tau of a normal family) is shown in the card's ``display_unit`` (``display``:
+    parameter -> unit) where it names one, else in its SI unit (``si_units``). ``mu`` of a log
+    coordinate is the natural log of the value in that unit, ``ln(kPa)`` (shifted by
+    ``-ln(to_si(display_unit))``), so that ``exp(mu)`` is the median in it; ``tau`` of a log
+    coordinate (an sd of that log) and correlations are dimensionless, ``-``."""
+    out = hyper.copy()
+    for c in ("estimate", "lower", "upper", "sd"):
+        out[c] = out[c].astype(float)
+    units = []
+    for i, (name, row) in enumerate(zip(out.index, out.itertuples(index=False))):
+        shown = display.get(str(name))
+        unit = shown or si_units.get(str(name), "")
+        dimensionless = unit in ("", "1", "-")
+        if row.quantity == "corr" or (row.coordinate == "log" and (row.quantity == "tau" or dimensionless)):
+            units.append("-")
+        elif row.coordinate == "log":
+            if shown:
+                for c in ("estimate", "lower", "upper"):
+                    out.iloc[i, out.columns.get_loc(c)] -= math.log(to_si(shown))
+            units.append(Markup("ln(") + unit_cell(unit) + Markup(")"))
+        else:
+            if shown:
+                for c in ("estimate", "lower", "upper", "sd"):
+                    out.iloc[i, out.columns.get_loc(c)] /= to_si(shown)
+            units.append("-" if dimensionless else unit_cell(unit))
+    out.insert(list(out.columns).index("quantity") + 1, "unit", units)
     return out
