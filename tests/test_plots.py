@@ -16,6 +16,7 @@ import pytest
 import skinfit
 from skinfit import plots
 from skinfit.io import registry
+from skinfit.io.units import pretty_unit, unit_mathtext
 from skinfit.plots import style
 from skinfit.plots.ppc import _bands_overlap
 
@@ -64,7 +65,12 @@ def _data_units(dataset):
 
 
 def _unit(u):
-    return "-" if u in ("1", "-") else u
+    """A unit as a figure label writes it: ``mm²``, ``N·s/m`` (skinfit.io.units.pretty_unit,
+    checked against pint in test_units), mathtext where a power has no superscript (``N^n_z``)."""
+    if u in ("1", "-"):
+        return "-"
+    text = pretty_unit(u)
+    return unit_mathtext(u) if "^" in text else text
 
 
 def _written(path):

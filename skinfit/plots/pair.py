@@ -1,5 +1,7 @@
 """The corner plot of a fit's posterior draws (:func:`plot_pair`)."""
 
+import re
+
 import matplotlib.ticker
 import numpy as np
 from matplotlib.figure import Figure
@@ -51,7 +53,7 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
     cell_chars = int((size - 1.2) / d * 72 / (0.6 * MIN_FONT))  # a column's width in characters, roughly
     labels = [_broken(param_label(s["name"], shown).replace(" [", "\n["), cell_chars)
               for s, (_, shown) in zip(slots, scales)]
-    chars = max(len(line) for text in labels for line in text.split("\n"))
+    chars = max(_visible_length(line) for text in labels for line in text.split("\n"))
     two_lines = max(t.count("\n") + 1 for t in labels) * 1.3 * MIN_FONT / 72 + 0.1
     left_in = chars * 0.6 * MIN_FONT / 72 + 0.15 if compact else two_lines
     # x labels stay level under the upright tick labels (turned upright too they ran into them)
@@ -128,5 +130,26 @@ def _broken(label, width):
             lines.append(current)
             current = ""
         current += piece
-    rest = [u.replace(" ", "\n", 1) if len(u) > width else u for u in rest]  # "[10⁻⁶" over "m^2/N^m]"
+    rest = [_break_unit(u) if _visible_length(u) > width else u for u in rest]  # "[10⁻⁶" over "m²/Nᵐ]"
     return "\n".join([*lines, current, *rest])
+
+
+def _break_unit(unit):
+    """``[10⁻⁶ m²/Nᵐ]`` -> ``[10⁻⁶`` / ``m²/Nᵐ]``: at the first space outside a mathtext span
+    (``$...$`` cut in two is drawn as its source); unchanged when there is none."""
+    depth = 0
+    for i, ch in enumerate(unit):
+        if ch == "$":
+            depth ^= 1
+        elif ch == " " and not depth:
+            return unit[:i] + "\n" + unit[i + 1:]
+    return unit
+
+
+def _visible_length(line):
+    """Characters ``line`` shows: a mathtext span counted by what it draws (``$\\mathrm{N}^{n_{z}}$``
+    as ``Nnz``), not by its source, which would widen the margins it sets."""
+    def drawn(m):
+        return re.sub(r"\\[A-Za-z]+|[{}^_ ]", "", m.group(0)[1:-1].replace("\\cdot", "*"))
+
+    return len(re.sub(r"\$[^$]*\$", drawn, line))

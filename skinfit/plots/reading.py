@@ -1,6 +1,7 @@
 """What the figures read from a saved fit: its model card, the units of its data and
 parameters, its sampled scalars (slots) and their axis labels."""
 
+import re
 import tomllib
 
 import numpy as np
@@ -38,9 +39,13 @@ def unit_factor(unit):
 def _unit_text(unit):
     """A unit in a figure label as a physicist writes it: ``N·s/m``, ``m²/Nᵐ``
     (:func:`skinfit.io.units.pretty_unit`); mathtext where plain text has no superscript for
-    a power (``N^n_z``); ``-`` for a dimensionless quantity."""
+    a power (``N^n_z``); ``-`` for a dimensionless quantity; a power of ten before the unit
+    (``10⁻⁶ m^2/N^m``, :func:`skinfit.plots.style.plain_scale`) kept outside the mathtext."""
     if unit in ("1", "-", ""):
         return "-"
+    power = re.match(r"10[\u207b\u2070\u00b9\u00b2\u00b3\u2074-\u2079]+ ", unit)  # "10⁻⁶ " of plain_scale
+    if power:
+        return power.group(0) + _unit_text(unit[power.end():])
     text = pretty_unit(unit)
     return unit_mathtext(unit) if "^" in text else text
 
