@@ -22,6 +22,7 @@ from skinfit.analysis.evidence.nested import nested
 from skinfit.errors import InputError
 from skinfit.io.arguments import as_generator, check_count, check_flag, check_seed
 from skinfit.results.fit import Fit, as_fit
+from skinfit.results.pointwise import theta_of
 
 __all__ = ["evidence", "posterior_draws", "METHODS"]
 
@@ -37,17 +38,9 @@ MAX_REPEATS = 10_000
 
 
 def posterior_draws(fit):
-    """Posterior draws of every sampled slot, natural units, shape (n_draws, d), slot order."""
-    post = fit.posterior
-    ds = fit.group("posterior")
-    cols = []
-    for slot in post.slots:
-        da = ds[slot.base]
-        if slot.level is not None:
-            dim = next(d for d in da.dims if d not in ("chain", "draw"))
-            da = da.sel({dim: slot.level})
-        cols.append(da.values.reshape(-1))
-    return np.column_stack(cols)
+    """Posterior draws of every sampled slot, natural units, shape (n_draws, d), slot order
+    (:func:`skinfit.results.pointwise.theta_of` of the fit's ``posterior`` group)."""
+    return theta_of(fit.posterior, fit.group("posterior"))
 
 
 def evidence(fit: Fit, method: str = "bridge", *, rng: int | np.random.Generator | None = None,
