@@ -3,6 +3,7 @@ canvas, no two pieces of text overlapping, none smaller than 8 pt (matplotlib's 
 ``Text.get_window_extent``)."""
 
 import itertools
+import re
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -65,3 +66,20 @@ def layout_problems(fig, min_font=8.0):
         if w > 1 and h > 1:  # more than a pixel each way
             problems.append(f"overlap: {wa!r} {ta.get_text()!r} and {wb!r} {tb.get_text()!r}")
     return problems
+
+
+def unplain_ticks(fig):
+    """Tick labels a reader has to decode: ``1e-05``, ``2×10⁻⁷``, or an offset/power text
+    beside an axis (the power belongs in the unit, plots.style.plain_scale)."""
+    fig.draw_without_rendering()
+    bad = []
+    for ax in fig.axes:
+        if not ax.get_visible():
+            continue
+        for axis in (ax.xaxis, ax.yaxis):
+            where = ax.get_xlabel() if axis is ax.xaxis else ax.get_ylabel()
+            bad += [(where, t.get_text()) for t in axis.get_ticklabels(which="both")
+                    if re.search(r"\de[-+]?\d|^[-+]?1e|\\times|×|10\^", t.get_text())]
+            if axis.get_offset_text().get_text():
+                bad.append((where, "offset " + axis.get_offset_text().get_text()))
+    return bad

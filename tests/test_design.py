@@ -636,7 +636,7 @@ def test_design_figure_keeps_its_labels_inside_and_names_its_markers(tmp_path):
     under 8 pt (the y label was cut at the top); its legend names the plan's circles and the
     band."""
     sys.path.insert(0, str(Path(__file__).parent))
-    from layout import layout_problems
+    from layout import layout_problems, unplain_ticks
 
     from skinfit.plots.design import plot_eig
 
@@ -645,5 +645,6 @@ def test_design_figure_keeps_its_labels_inside_and_names_its_markers(tmp_path):
     result = skinfit.design("electroadhesion", cands, n=3, rng=2, n_outer=40, n_inner=40, noise_scale=0.02)
     fig = plot_eig(result, tmp_path / "eig.png")
     assert not layout_problems(fig), layout_problems(fig)[:6]
+    assert not unplain_ticks(fig), unplain_ticks(fig)[:4]
     legend = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "in the plan (size: repeats)" in legend and "±2 Monte Carlo standard errors" in legend

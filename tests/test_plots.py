@@ -106,6 +106,22 @@ def test_ppc_plot_in_the_units_the_data_came_in(model, dataset, fits, tmp_path):
         np.testing.assert_allclose(np.sort(plotted), np.sort(od))
 
 
+def test_the_tick_check_sees_scientific_notation_and_offsets():
+    """Negative control of unplain_ticks: matplotlib's defaults for values of 1e-7 fail it."""
+    from matplotlib.figure import Figure
+
+    fig = Figure()
+    ax = fig.subplots()
+    ax.plot([1e-7, 3e-7], [1.0, 2.0])
+    assert unplain_ticks(fig)  # the offset text "1e-7"
+    ax.set_xscale("log")
+    ax.set_xlim(1e-8, 1e-5)
+    assert unplain_ticks(fig)  # "10^{-7}" mathtext decades
+    fig = Figure()
+    fig.subplots().plot([0.1, 3.0], [1.0, 2.0])
+    assert not unplain_ticks(fig)
+
+
 @pytest.mark.parametrize("model,dataset", SHIPPED, ids=[f"{m}-{d}" for m, d in SHIPPED])
 def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_path):
     fit = fits(model, dataset)
@@ -125,6 +141,7 @@ def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_p
         wanted = list(expected.values())[:10] if name == "pair" else expected.values()
         missing = [w for w in wanted if w not in shown]
         assert not missing, f"{name}: no axis labelled {missing}"
+        assert not unplain_ticks(fig), f"{name}: {unplain_ticks(fig)[:4]}"
     if model == "electroadhesion":
         assert "E_star [Pa]" in expected.values() and "alpha [-]" in expected.values()
     fig = plots.plot_rank(fit, tmp_path / "rank.png")
@@ -486,7 +503,7 @@ def test_reference_curve_of_the_wavy_surface(standin, tmp_path):
 
 
 # ---- layout: measured on the drawn figures at their saved size -----------------------------------
-from layout import layout_problems  # noqa: E402  (tests/layout.py)
+from layout import layout_problems, unplain_ticks  # noqa: E402  (tests/layout.py)
 
 FIGURES = [("ppc", plots.plot_ppc), ("pair", plots.plot_pair), ("trace", plots.plot_trace),
            ("prior_posterior", plots.plot_prior_posterior), ("rank", plots.plot_rank)]
@@ -500,6 +517,7 @@ def test_figures_keep_text_inside_the_canvas_unoverlapped_and_at_least_8pt(model
         assert fig.get_figwidth() <= plots.MAX_WIDTH + 1e-9, f"{name}: wider than the report shows at full size"
         problems = layout_problems(fig)
         assert not problems, f"{name}: " + "; ".join(problems[:6])
+        assert not unplain_ticks(fig), f"{name}: {unplain_ticks(fig)[:4]}"
 
 
 def test_layout_check_finds_clipped_overlapping_and_small_text():
@@ -626,6 +644,12 @@ def test_log_axis_labels_decades_as_plain_numbers_with_unlabelled_minor_ticks():
     minor = [0.07, 0.08, 0.09] + [k / 10 for k in range(2, 10)] + [2.0, 3.0]
     np.testing.assert_allclose(_in_view(ax.xaxis, ax.xaxis.get_minorticklocs()), minor)
     assert not any(t.label1.get_text() for t in ax.xaxis.get_minor_ticks())
+
+
+def test_tick_values_read_as_plain_digits_or_a_power_of_ten():
+    """3 significant digits without an exponent from 0.001 to 99 999; decades beyond as 10ⁿ."""
+    values = [7500.0, 0.002, 0.15, 123456.0, 1e6, 1e-4, 1e5, -2.5]
+    assert [style.tick_text(v) for v in values] == ["7500", "0.002", "0.15", "123000", "10⁶", "10⁻⁴", "10⁵", "−2.5"]
 
 
 def test_short_log_axis_labels_1_2_5_and_draws_no_minor_ticks_between():

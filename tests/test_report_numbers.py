@@ -436,3 +436,28 @@ def test_a_fits_parameters_split_by_one_column_share_one_forest_figure(tmp_path)
     assert [j["path"].name for j in forests] == ["k_forest_voltage.png", "k_forest_gamma.png"]
     assert forests[0]["entry"]["caption"] == "alpha, beta per voltage (a panel each): posterior mean and 80% HDI"
     assert all(j["kwargs"] == {"ci_prob": 0.8} for j in forests)
+
+
+def test_effects_and_shrunk_tables_name_their_unit_in_display_units():
+    """The population's effects: a population value or a difference of means in the parameter's
+    display unit (values scaled), a ratio of medians dimensionless; a subject table of one
+    parameter scaled to its display unit and named with it. The tables given stay in SI."""
+    from skinfit.report.tables import effect_units, in_display_unit
+
+    effects = pd.DataFrame({"parameter": ["m1", "E[M10] vs E[M01]", "E[M10] vs E[M01]"],
+                            "question": ["population mean of m1 vs 0", "difference of means", "ratio of medians"],
+                            "estimate": [0.3, 2e4, 1.2], "sd": [0.1, 5e3, 0.1], "lower": [0.1, 1e4, 1.0],
+                            "upper": [0.5, 3e4, 1.4], "p_above": [0.99, 0.999, 0.97]})
+    shown = effect_units(effects, {"E": "kPa"}, {"E": "Pa", "m1": "1/N"})
+    assert list(shown.columns[:3]) == ["parameter", "question", "unit"]
+    assert [str(u) for u in shown["unit"]] == ["1/N", "kPa", "-"]
+    np.testing.assert_allclose(shown["estimate"], [0.3, 20, 1.2], rtol=1e-12)
+    np.testing.assert_allclose(shown["upper"], [0.5, 30, 1.4], rtol=1e-12)
+    np.testing.assert_allclose(shown["p_above"], effects["p_above"])  # probabilities are not scaled
+    assert effects["estimate"].iloc[1] == 2e4
+    subjects = pd.DataFrame({"sd": [1e3], "separate": [2e5], "separate_lower": [1.8e5], "shrunk": [1.9e5],
+                             "contraction": [0.9]}, index=pd.Index(["S01"], name="subject"))
+    table, unit = in_display_unit(subjects, "E[M10]", {"E": "kPa"}, {"E": "Pa"})
+    assert str(unit) == "kPa" and table.loc["S01", "separate"] == 200 and table.loc["S01", "contraction"] == 0.9
+    table, unit = in_display_unit(subjects, "a", {}, {"a": "m^2/N^m"})
+    assert str(unit) == "m²/N<sup>m</sup>" and table.loc["S01", "separate"] == 2e5

@@ -16,6 +16,7 @@ from skinfit.plots.style import (
     log_ticks,
     plain_scale,
     suptitle,
+    tick_text,
 )
 from skinfit.results.fit import as_fit
 
@@ -98,7 +99,7 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
             for axis in (ax.xaxis, ax.yaxis):
                 if axis.get_scale() != "log":  # no label at a cell's edge, where it would meet the next
                     axis.set_major_locator(matplotlib.ticker.MaxNLocator(3, prune="both"))
-                    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
+                    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: tick_text(v)))
             if i == j:
                 ax.set_yticks([])
     for j in range(d):  # the x range of each column is its marginal's

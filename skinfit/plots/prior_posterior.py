@@ -6,8 +6,17 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from skinfit.plots.reading import sampled_slots, slot_label, slot_values, use_log
-from skinfit.plots.style import COLOURS, MIN_FONT, finish_figure, log_ticks, new_figure, suptitle, wrap_title
+from skinfit.plots.reading import param_label, sampled_slots, slot_values, use_log
+from skinfit.plots.style import (
+    COLOURS,
+    MIN_FONT,
+    finish_figure,
+    log_ticks,
+    new_figure,
+    plain_scale,
+    suptitle,
+    wrap_title,
+)
 from skinfit.results.fit import as_fit
 
 __all__ = ["plot_prior_posterior"]
@@ -36,7 +45,11 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
         ax = axes.ravel()[k]
         v = slot_values(ds, s).ravel()
         prior = s["prior"]
-        lo_q, hi_q = (prior.ppf(np.array([0.005, 0.995])) if prior is not None else np.quantile(v, [0, 1]))
+        # the axis in plain numbers (an SI prefix or a power of ten in the unit): x = SI / factor
+        factor, unit = plain_scale(v, s["unit"])
+        v = v / factor
+        lo_q, hi_q = (prior.ppf(np.array([0.005, 0.995])) / factor if prior is not None
+                      else np.quantile(v, [0, 1]))
         lo_q = max(lo_q, np.min(v) * 1e-3) if s["log"] else lo_q
         log = use_log(s, [lo_q, hi_q, v.min(), v.max()])
         t = np.log10(v) if log else v
@@ -50,7 +63,7 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
             grid = np.linspace(lo, hi, 400)
             xs = 10 ** grid if log else grid
             with np.errstate(divide="ignore", over="ignore"):
-                dens = np.exp(prior.logpdf(xs)) * (xs * math.log(10) if log else 1.0)
+                dens = np.exp(prior.logpdf(xs * factor)) * (xs * math.log(10) if log else 1.0)
             if np.nanmax(dens) > 0:
                 ax.plot(xs, dens / np.nanmax(dens), color="black", lw=1.2, label="prior")
         if log:
@@ -60,7 +73,7 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
             log_ticks(ax)
         ax.set_ylim(0, 1.08)
         ax.set_yticks([])
-        ax.set_xlabel(slot_label(s), fontsize=9)
+        ax.set_xlabel(param_label(s["name"], unit), fontsize=9)
         ax.tick_params(labelsize=MIN_FONT)
         c = summary.loc[s["name"], "contraction"] if s["name"] in summary.index else np.nan
         ax.set_title(wrap_title(f"{s['name']}: contraction {c:.2f}", ax, 9), fontsize=9)

@@ -11,7 +11,7 @@ from skinfit.io.priors import parse_prior
 from skinfit.io.units import pretty_unit, to_si, unit_mathtext
 from skinfit.results.fit import as_fit
 
-__all__ = ["model_card", "data_units", "unit_factor", "axis_label", "param_label", "slot_label",
+__all__ = ["model_card", "data_units", "unit_factor", "axis_label", "param_label",
            "parameter_units", "saved_priors", "sampled_slots", "use_log", "slot_values"]
 
 
@@ -60,11 +60,6 @@ def param_label(name, unit):
     """``"E_star", "Pa"`` -> ``"E_star [Pa]"``: parameter names are kept as written, unlike
     column labels (:func:`axis_label`)."""
     return name if unit is None else f"{name} [{_unit_text(unit)}]"
-
-
-def slot_label(slot):
-    """Axis label of a sampled scalar (:func:`sampled_slots`)."""
-    return param_label(slot["name"], slot["unit"])
 
 
 def parameter_units(fit):

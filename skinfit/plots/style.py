@@ -21,7 +21,7 @@ from PIL import Image
 
 __all__ = ["COLOURS", "MAP_COLOUR", "DPI", "MAX_WIDTH", "MIN_FONT", "SAVE_RC", "ensure_backend", "new_figure",
            "suptitle", "wrap_title", "log_ticks", "save_figure", "finish_figure", "fix_layout",
-           "write_figure_files", "plain_scale"]
+           "write_figure_files", "plain_scale", "tick_text"]
 
 #: Okabe & Ito's colour-blind-safe palette (Color Universal Design, 2008; yellow left out: too
 #: pale on white), then two darker greys.
@@ -92,14 +92,27 @@ def log_ticks(ax, which="x", numticks=5, sparse=False):
     short = math.log10(hi / lo) < 1.5
     if short and sparse:
         axis.set_major_locator(MaxNLocator(numticks, prune="both"))
-        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+        axis.set_major_formatter(FuncFormatter(lambda v, _: tick_text(v)))
     else:
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0) if short else (1.0,),
                                           numticks=3 * numticks if short else numticks))
-        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        axis.set_major_formatter(FuncFormatter(lambda v, _: tick_text(v)))
     if short and not sparse:
         axis.set_minor_locator(NullLocator())
     axis.set_minor_formatter(NullFormatter())
+
+
+def tick_text(value):
+    """A tick's value as a reader reads it, never ``1e+06``: plain digits to 3 significant
+    figures (``0.002``, ``7500``), a power of ten below 0.001 or from 100 000 on as ``10⁻⁴``, ``10⁶``
+    (a log axis over many decades, e.g. a wide prior)."""
+    if value == 0 or not math.isfinite(value):
+        return "0" if value == 0 else ""
+    power = round(math.log10(abs(value)))
+    if not 1e-3 <= abs(value) < 1e5 and math.isclose(abs(value), 10.0 ** power, rel_tol=1e-9):
+        return ("−" if value < 0 else "") + "10" + str(power).translate(_SUPERSCRIPT)
+    text = np.format_float_positional(value, precision=3, unique=True, fractional=False, trim="-")
+    return text.replace("-", "\u2212")  # the minus sign, as matplotlib's own tick labels write it
 
 
 def save_figure(fig, target, **kwargs):

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from skinfit.plots.reading import sampled_slots, slot_label, slot_values, use_log
-from skinfit.plots.style import COLOURS, MIN_FONT, finish_figure, log_ticks, new_figure, suptitle
+from skinfit.plots.reading import param_label, sampled_slots, slot_values, use_log
+from skinfit.plots.style import COLOURS, MIN_FONT, finish_figure, log_ticks, new_figure, plain_scale, suptitle
 from skinfit.results.fit import as_fit
 
 __all__ = ["plot_trace"]
@@ -34,6 +34,8 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
     axes = fig.subplots(len(slots), 2, squeeze=False, width_ratios=[3, 1])
     for i, s in enumerate(slots):
         v = slot_values(ds, s)  # (walkers, draws)
+        factor, unit = plain_scale(v, s["unit"])  # plain numbers: an SI prefix or a power of ten in the unit
+        v = v / factor
         ax = axes[i, 0]
         step = max(1, v.shape[1] // max_points)  # the picture of a long chain, at a fraction of the ink
         shown = np.linspace(0, len(v) - 1, min(len(v), max_walkers)).astype(int)
@@ -41,7 +43,7 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
         if use_log(s, v):
             ax.set_yscale("log")
             log_ticks(ax, "y")
-        ax.set_ylabel(slot_label(s), fontsize=8)
+        ax.set_ylabel(param_label(s["name"], unit), fontsize=8)
         ax.tick_params(labelsize=MIN_FONT)
         ranks = _ranks(v)
         groups = np.array_split(np.arange(len(v)), min(n_groups, len(v)))

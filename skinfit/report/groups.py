@@ -26,21 +26,20 @@ from skinfit.analysis.population.population import population as fit_population
 from skinfit.analysis.population.result import DERIVED
 from skinfit.errors import InputError
 from skinfit.io.labels import parameter_units
-from skinfit.io.units import to_si
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
 from skinfit.report.tables import (
     base_name,
     cells,
     display_unit_map,
+    effect_units,
     file_part,
+    in_display_unit,
     not_applicable,
     population_units,
     unique_name,
-    unit_cell,
 )
 from skinfit.results.intervals import CI_PROB, interval_columns, interval_name
 from skinfit.results.run_labels import run_labels
-from skinfit.results.summary import is_estimate_column
 
 __all__ = ["CONTRAST_ROWS", "contrast_display", "contrast_sentence", "shown_population_rows",
            "subject_label", "row_labels", "PopulationView", "subjects_section", "population_section",
@@ -493,11 +492,8 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
         for pname, table in subj["tables"].items():
             stem = f"subjects_{safe}_{file_part(pname)}"
             table.to_csv(out_dir / f"{stem}.csv")
-            unit = display.get(base_name(pname))
-            shown = table if unit is None else table.assign(**{c: table[c] / to_si(unit) for c in table.columns
-                                                                if c == "sd" or is_estimate_column(c)})
-            tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": cells(shown, "subject"),
-                           "unit": unit_cell(unit or si_units.get(base_name(pname), ""))})
+            shown, unit = in_display_unit(table, pname, display, si_units)
+            tables.append({"parameter": pname, "csv": f"{stem}.csv", "table": cells(shown, "subject"), "unit": unit})
         pop_result = populations.get(model_id)
         pop_info = population_section(pop_result, ci_prob) if pop_result is not None else None
         if pop_info is not None:
@@ -511,12 +507,13 @@ def across_fits(items, figdir, population, populations, out_dir, jobs, ci_prob=C
             pop_tables = {"hyper": cells(hyper, "parameter",
                                          not_applicable(hyper, ["r_hat", "ess_bulk", "ess_tail"], derived)),
                           "csv": f"population_{safe}.csv",
-                          "subjects": [{"parameter": k, "table": cells(v, "subject")}
-                                       for k, v in pop_info["subjects"].items()],
+                          "subjects": [{"parameter": k, "table": cells(shown, "subject"), "unit": unit}
+                                       for k, v in pop_info["subjects"].items()
+                                       for shown, unit in [in_display_unit(v, k, display, si_units)]],
                           "hyperpriors": cells(pop_info["hyperprior_table"], "parameter"),
                           "effects": None if pop_info["effects"] is None else
-                          cells(pop_info["effects"].set_index(pop_info["effects"].columns[0]),
-                                pop_info["effects"].columns[0]),
+                          cells(effect_units(pop_info["effects"], display, si_units).set_index("parameter"),
+                                "parameter"),
                           "warnings": pop_info["warnings"], "origin": pop_info["origin"],
                           "issues": population_issues(pop_result), "converged": bool(pop_result.converged),
                           "correlation": pop_info["correlation"], "sampler": pop_info["sampler_text"]}

@@ -416,8 +416,11 @@ def _summary_md(ctx):
             lines += ["", f"### {tb['parameter']} per subject{unit}", "", markdown(tb["table"])]
         if a["population"]:
             lines += ["", "### Population", "", markdown(a["population"]["hyper"])]
+            if a["population"]["effects"]:
+                lines += ["", "#### Conditions as effects", "", markdown(a["population"]["effects"])]
             for tb in a["population"]["subjects"]:
-                lines += ["", f"#### {tb['parameter']}: separate and shrunk", "", markdown(tb["table"])]
+                unit = f" [{tb['unit']}]" if tb.get("unit") not in (None, "", "1") else ""
+                lines += ["", f"#### {tb['parameter']}{unit}: separate and shrunk", "", markdown(tb["table"])]
         lines += [f"![{f['alt']}]({f['file']})" for f in a["figures"]]
     for c in ctx["contrasts"]:
         lines += ["", f"## Contrasts: {c['name']}", "", c["sentence"], ""]

@@ -17,7 +17,7 @@ from skinfit.results.summary import format_numbers, is_estimate_column
 
 __all__ = ["file_part", "unique_name", "cell_text", "cells", "not_applicable", "markdown", "level_names",
            "base_name", "defang", "break_at_underscores", "ranking_note", "display_unit_map", "display_units",
-           "unit_cell", "population_units"]
+           "unit_cell", "population_units", "effect_units", "in_display_unit"]
 
 
 def file_part(text):
@@ -216,4 +216,37 @@ def population_units(hyper, display, si_units):
                     out.iloc[i, out.columns.get_loc(c)] /= to_si(shown)
             units.append("-" if dimensionless else unit_cell(unit))
     out.insert(list(out.columns).index("quantity") + 1, "unit", units)
+    return out
+
+
+def in_display_unit(table, parameter, display, si_units):
+    """(table, unit cell): a table of one parameter's values in SI (estimate and interval
+    columns, ``sd``) converted to the card's ``display_unit`` where it names one, for display
+    (the CSV stays in SI), and the unit its values are now in."""
+    unit = display.get(base_name(parameter))
+    if unit is not None:
+        table = table.assign(**{c: table[c] / to_si(unit) for c in table.columns
+                                if c == "sd" or is_estimate_column(c)})
+    return table, unit_cell(unit or si_units.get(base_name(parameter), ""))
+
+
+def effect_units(effects, display, si_units):
+    """A population's effects table (:meth:`PopulationResult.effects`, values in SI) for display,
+    with a ``unit`` column after ``question``: a population value or a difference of means in
+    the parameter's display unit (estimate, sd and interval ends converted) or SI unit, a ratio
+    of medians dimensionless (``-``)."""
+    out = effects.copy()
+    values = [out.columns.get_loc(c) for c in out.columns if c == "sd" or is_estimate_column(c)]
+    units = []
+    for i, (parameter, question) in enumerate(zip(out["parameter"], out["question"])):
+        base = base_name(str(parameter).split(" vs ")[0])
+        unit = display.get(base)
+        if question == "ratio of medians":
+            units.append("-")
+            continue
+        if unit is not None:
+            out.iloc[i, values] = out.iloc[i, values].astype(float) / to_si(unit)
+        unit = unit or si_units.get(base, "")
+        units.append("-" if unit in ("", "1", "-") else unit_cell(unit))
+    out.insert(list(out.columns).index("question") + 1, "unit", units)
     return out

@@ -44,7 +44,8 @@ def hdi(x, prob=CI_PROB):
     """Highest-density interval of 1-D draws ``x``: the narrowest interval between two sorted
     draws holding ``floor(prob * n)`` steps of them, ``(lower, upper)``, as
     ``arviz_stats.hdi(x, prob)`` ("nearest" method) gives it (tests/test_contrasts.py checks
-    that)."""
+    that). Five lines of our own rather than a call: importing arviz_stats takes 1.4 s (it brings
+    scipy.stats), which loading a fit and drawing its figures otherwise do without."""
     x = np.sort(np.asarray(x, dtype=float).ravel())
     if not 0 < prob <= 1 or len(x) == 0:
         raise ValueError(f"expected draws and 0 < prob <= 1 (got {len(x)} draws, prob {prob})")
