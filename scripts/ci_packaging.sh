@@ -17,7 +17,7 @@ echo "== lowest direct versions =="
 "$UV" venv -q --python "$PY" "$WORK/low"
 VIRTUAL_ENV="$WORK/low" "$UV" pip install -q --resolution lowest-direct -e ".[test]"
 VIRTUAL_ENV="$WORK/low" "$UV" pip freeze | grep -Ei '^(numpy|scipy|pandas|xarray|arviz[a-z-]*|emcee|nlopt|h5netcdf|h5py|matplotlib|pillow|jinja2|platformdirs|threadpoolctl)=='
-"$WORK/low/bin/python" -m pytest -q -p no:cacheprovider -m "not slow" tests/test_models.py tests/test_priors.py \
+"$WORK/low/bin/python" -m pytest -q -p no:cacheprovider -n auto --dist loadfile -m "not slow" tests/test_models.py tests/test_priors.py \
   tests/test_data.py tests/test_physics_electroadhesion.py tests/test_fit.py tests/test_compare.py \
   tests/test_references.py tests/test_public_api.py tests/test_figure_files.py tests/test_startup.py \
   tests/test_netcdf.py tests/test_workers.py
@@ -51,7 +51,7 @@ echo "== sdist unpacked, installed in a clean venv, its own tests run from its t
 tar xzf "$WORK"/sdist/skinfit-*.tar.gz -C "$WORK/sdist"
 "$UV" venv -q --python "$PY" "$WORK/sdvenv"
 (cd "$WORK"/sdist/skinfit-*/ && VIRTUAL_ENV="$WORK/sdvenv" "$UV" pip install -q ".[test]" \
-  && "$WORK/sdvenv/bin/python" -m pytest -q -p no:cacheprovider -m "not slow" tests/test_plugin.py \
+  && "$WORK/sdvenv/bin/python" -m pytest -q -p no:cacheprovider -n auto --dist loadfile -m "not slow" tests/test_plugin.py \
      tests/test_posterior.py tests/test_sampling.py tests/test_tutorial.py \
      tests/test_own_model.py::test_the_executed_tutorial_runs_and_recovers_its_truth \
      tests/test_references.py tests/test_priors.py tests/test_models.py tests/test_student_t.py tests/test_packaging.py)

@@ -55,6 +55,17 @@ def refused(capsys):
 MECHANICS = {"test_browser.py", "test_campaign.py", "test_checkpoint.py", "test_demo.py", "test_figure_files.py",
              "test_figure_folder.py", "test_own_files.py", "test_plots.py", "test_report.py", "test_report_groups.py", "test_soak.py"}
 
+#: Single tests of the same kind in files otherwise of the default run: whole command-line runs
+#: in new processes, caches and overwrite refusals on disk (10-25 s each on 2 cores).
+MECHANICS_TESTS = {
+    ("test_outputs.py", "test_class_results_overwritten_population_out"),
+    ("test_population.py", "test_cli_writes_tree_tables_and_states_the_family"),
+    ("test_population.py", "test_a_population_records_its_fits_by_content_and_its_seed"),
+    ("test_population.py", "test_a_cached_population_keeps_its_diagnostics"),
+    ("test_startup.py", "test_skinfit_fit_in_a_new_process_saves_every_group"),
+    ("test_startup.py", "test_a_saved_fits_figures_import_what_each_needs"),
+}
+
 
 #: Long correctness checks (samplers against quadrature and closed forms, SBC, recovery on
 #: shipped data, memory budgets): (file, test) marked ``heavy``, run by .ci/run beside the default run.
@@ -73,6 +84,8 @@ HEAVY = {
     ("test_physics_wavy.py", "test_recovery_on_the_shipped_dataset"),
     ("test_evidence.py", "test_nested_matches_closed_form"),
     ("test_moves.py", "test_negative_control_emcee_released_snooker_is_biased"),
+    ("test_moves.py", "test_independence_move_samples_gaussian"),
+    ("test_moves.py", "test_negative_control_independence_move_without_hastings_factor_is_biased"),
     ("test_errors_resources.py", "test_class5_pointwise_groups_thinned_to_the_memory_budget"),
     ("test_errors_resources.py", "test_class6_full_tmpfs_gives_one_line_and_no_crash"),
     ("test_design.py", "test_skinfit_report_shows_a_design_folder_as_a_section"),
@@ -81,7 +94,7 @@ HEAVY = {
 
 def pytest_collection_modifyitems(config, items):
     for item in items:
-        if item.path.name in MECHANICS:
+        if item.path.name in MECHANICS or (item.path.name, getattr(item, "originalname", item.name)) in MECHANICS_TESTS:
             item.add_marker(pytest.mark.mechanics)
         if (item.path.name, getattr(item, "originalname", item.name)) in HEAVY:
             item.add_marker(pytest.mark.heavy)

@@ -216,15 +216,30 @@ def test_same_seed_same_plan():
 
 
 def test_report_section_shows_plan_comparison_and_figure(tmp_path):
-    from skinfit.report.design import design_section_html
+    """The design's section: its figure, plan vs baseline with the EIG at the precision of its
+    Monte Carlo error, the predicted sds to two significant digits with their units (an sd of a
+    log coordinate has none), and the plan in the user's units."""
+    from skinfit.io.labels import round_to_sd
+    from skinfit.report.design import design_section
 
     cands = {"grid": {"normal_force": {"unit": "N", "values": [0.2, 1.0, 2.0]}, "voltage": {"unit": "V",
                                                                                           "values": [0, 200]}}}
     result = skinfit.design("electroadhesion", cands, n=3, rng=2, n_outer=40, n_inner=40, noise_scale=0.02)
-    html = design_section_html(result, tmp_path / "figures")
+    section = design_section(result, tmp_path / "figures")
     assert (tmp_path / "figures" / "design_electroadhesion.png").stat().st_size > 1000
-    assert 'src="figures/design_electroadhesion.png"' in html
-    assert html.count("<table") == 3 and "Plan vs baseline" in html
+    assert section["figure"]["file"] == "figures/design_electroadhesion.png"
+    titles = [t["title"] for t in section["tables"]]
+    assert len(titles) == 3 and titles[0].startswith("Plan vs baseline") and titles[-1] == "Plan (user units)"
+    comparison = section["tables"][0]["table"]
+    plan = dict(zip(comparison["columns"], comparison["rows"][0]))
+    c = result.comparison.loc["plan"]
+    assert plan["eig"] == round_to_sd(c["eig_nmc"], c["eig_nmc_se"]) and plan["eig_se"] == round_to_sd(
+        c["eig_nmc_se"], c["eig_nmc_se"]) and plan["eig_bias"] == round_to_sd(c["eig_nmc_bias"], c["eig_nmc_se"])
+    sd = section["tables"][1]["table"]
+    rows = {r[0]: dict(zip(sd["columns"], r)) for r in sd["rows"]}
+    assert rows["E_star"]["unit"] == "- (sd of ln)" and rows["alpha"]["unit"] == "-"
+    assert rows["E_star"]["plan"] == round_to_sd(result.sd.loc["E_star", "plan"], result.sd.loc["E_star", "plan"])
+    assert len(section["tables"][-1]["table"]["rows"]) == len(result.plan)
 
 
 def test_skinfit_report_shows_a_design_folder_as_a_section(tmp_path, capsys):

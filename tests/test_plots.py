@@ -650,6 +650,12 @@ def test_tick_values_read_as_plain_digits_or_a_power_of_ten():
     """3 significant digits without an exponent from 0.001 to 99 999; decades beyond as 10ⁿ."""
     values = [7500.0, 0.002, 0.15, 123456.0, 1e6, 1e-4, 1e5, -2.5]
     assert [style.tick_text(v) for v in values] == ["7500", "0.002", "0.15", "123000", "10⁶", "10⁻⁴", "10⁵", "−2.5"]
+    assert [style.tick_text(v, powers=True) for v in (1.0, 100.0, 2.0)] == ["10⁰", "10²", "2"]
+    fig, (ax,) = _log_axes(1, (10.0, 2e5))  # a decade axis reaching 10⁵: every decade as a power
+    style.log_ticks(ax, "x")
+    fig.draw_without_rendering()
+    major = _in_view(ax.xaxis, ax.xaxis.get_majorticklocs())
+    assert [ax.xaxis.get_major_formatter()(v) for v in major] == ["10¹", "10²", "10³", "10⁴", "10⁵"]
 
 
 def test_short_log_axis_labels_1_2_5_and_draws_no_minor_ticks_between():

@@ -96,20 +96,22 @@ def log_ticks(ax, which="x", numticks=5, sparse=False):
     else:
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0) if short else (1.0,),
                                           numticks=3 * numticks if short else numticks))
-        axis.set_major_formatter(FuncFormatter(lambda v, _: tick_text(v)))
+        # decades beyond 0.001 .. 99 999 on the axis: all of them as 10ⁿ, not 10000 beside 10⁵
+        powers = not short and (lo < 1e-3 or hi >= 1e5)
+        axis.set_major_formatter(FuncFormatter(lambda v, _: tick_text(v, powers)))
     if short and not sparse:
         axis.set_minor_locator(NullLocator())
     axis.set_minor_formatter(NullFormatter())
 
 
-def tick_text(value):
+def tick_text(value, powers=False):
     """A tick's value as a reader reads it, never ``1e+06``: plain digits to 3 significant
     figures (``0.002``, ``7500``), a power of ten below 0.001 or from 100 000 on as ``10⁻⁴``, ``10⁶``
-    (a log axis over many decades, e.g. a wide prior)."""
+    (a log axis over many decades, e.g. a wide prior); ``powers``: every power of ten so."""
     if value == 0 or not math.isfinite(value):
         return "0" if value == 0 else ""
     power = round(math.log10(abs(value)))
-    if not 1e-3 <= abs(value) < 1e5 and math.isclose(abs(value), 10.0 ** power, rel_tol=1e-9):
+    if (powers or not 1e-3 <= abs(value) < 1e5) and math.isclose(abs(value), 10.0 ** power, rel_tol=1e-9):
         return ("−" if value < 0 else "") + "10" + str(power).translate(_SUPERSCRIPT)
     text = np.format_float_positional(value, precision=3, unique=True, fractional=False, trim="-")
     return text.replace("-", "\u2212")  # the minus sign, as matplotlib's own tick labels write it

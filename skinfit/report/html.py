@@ -23,7 +23,6 @@ from pathlib import Path
 
 import jinja2
 import numpy as np
-from markupsafe import Markup
 
 from skinfit import __version__
 from skinfit.analysis.design import load_design
@@ -42,7 +41,7 @@ from skinfit.report.checks import (
     fit_diagnostics,
     section_issues,
 )
-from skinfit.report.design import design_section_html
+from skinfit.report.design import design_section
 from skinfit.report.figures import draw_figure, fit_figure_jobs, render_figures
 from skinfit.report.groups import (
     CONTRAST_ROWS,
@@ -306,8 +305,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
 
     design_sections = []
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
-        design_sections = [{"id": f"design-{d.model_id}", "name": d.model_id, "issues": design_issues(d),
-                            "html": Markup(design_section_html(d, figdir))} for d in designs]
+        design_sections = [{**design_section(d, figdir), "issues": design_issues(d)} for d in designs]
     issues_all.extend(section_issues(across, comparisons, contrast_tables, design_sections, given))
     issues_all.sort(key=lambda i: i["status"] != "FAIL")  # failures first, then warnings (stable)
     n_fail = sum(i["status"] == "FAIL" for i in issues_all)
@@ -426,6 +424,11 @@ def _summary_md(ctx):
         lines += ["", f"## Contrasts: {c['name']}", "", c["sentence"], ""]
         lines += [f"![{f['alt']}]({f['file']})" for f in c["figures"]]
         lines += ["", markdown(c["table"]), "", f"CSV: `{c['csv']}` (all {c['n']} comparisons)"]
+    for d in ctx["designs"]:
+        lines += ["", f"## Design the next experiment: {d['name']}", "", d["sentence"], "",
+                  f"![{d['figure']['alt']}]({d['figure']['file']})"]
+        for t in d["tables"]:
+            lines += ["", f"### {t['title']}", "", markdown(t["table"])]
     for s in ctx["sections"]:
         lines += ["", f"## {s['where']}", "", f"Produced by {s['prov_line']}.", "",
                   f"Model: {s['prov']['model_title']} ({s['prov']['model_source']}).", "",
