@@ -7,6 +7,7 @@ tests read the tables and the text, not the images."""
 
 import math
 import re
+import sys
 import warnings
 from html.parser import HTMLParser
 from pathlib import Path
@@ -357,6 +358,10 @@ def test_contrast_matrix_draws_each_pair_once_each_way():
     i, j = np.triu_indices(13, 1)
     np.testing.assert_allclose(values[i, j], 0.1 * (i - j), atol=0.02)
     assert len(ax.lines[0].get_xdata()) == 2 * int((table["prob_direction"] > 0.95).sum())
+    sys.path.insert(0, str(Path(__file__).parent))
+    from layout import layout_problems, unplain_ticks
+
+    assert not unplain_ticks(fig) and not layout_problems(fig), (unplain_ticks(fig), layout_problems(fig)[:4])
 
 
 def test_a_cards_rope_is_read_and_checked(tmp_path):
