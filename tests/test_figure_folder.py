@@ -104,3 +104,32 @@ def test_nothing_is_written_outside_the_report_folder(ea_fit, drawn, tmp_path, m
     # skinfit.plots keeps the figures' font in the cache folder; the report writes nothing there
     assert sorted(n for n in written if not n.startswith("cache/skinfit/fonts/")) == sorted(
         f"{d}/{n}" for d in "ab" for n in (a.name, a.with_suffix(".pdf").name, MANIFEST))
+
+
+def test_contrast_matrices_are_kept_while_their_pairs_are_the_same(ea_fit, drawn, tmp_path):
+    """A report's contrast matrices are figure jobs like the others: a second report into the
+    same folder draws none of them again; another contrast table draws its matrix again."""
+    import itertools
+
+    import numpy as np
+    import pandas as pd
+
+    from skinfit.analysis.contrasts import contrast
+    from skinfit.report.html import MATRIX_LABELS, write_report
+
+    rng = np.random.default_rng(0)
+    subjects = {f"S{i:02d}": np.exp(rng.normal(np.log(2e4) + 0.1 * i, 0.1, 2000)) for i in range(MATRIX_LABELS)}
+
+    def table(shift=1.0):
+        return pd.DataFrame([{"A": a, "B": b, "parameter": "E_star", **contrast(subjects[a] * shift, subjects[b])}
+                             for a, b in itertools.combinations(subjects, 2)])
+
+    out = tmp_path / "report"
+    write_report({"ea": ea_fit}, out, contrasts={"between subjects": table()})
+    matrix = out / "figures" / "contrasts_between_subjects_E_star.png"
+    first, stamp = len(drawn), matrix.stat().st_mtime_ns
+    assert first >= 2 and 'src="figures/contrasts_between_subjects_E_star.png"' in (out / "index.html").read_text()
+    write_report({"ea": ea_fit}, out, contrasts={"between subjects": table()})
+    assert len(drawn) == first and matrix.stat().st_mtime_ns == stamp, "unchanged: nothing drawn again"
+    write_report({"ea": ea_fit}, out, contrasts={"between subjects": table(shift=1.2)})
+    assert len(drawn) == first + 1 and matrix.stat().st_mtime_ns != stamp, "other pairs: the matrix drawn again"

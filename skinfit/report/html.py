@@ -32,7 +32,6 @@ from skinfit.inference.checkpoint import CheckpointLock
 from skinfit.io.labels import derived_units, parameter_units
 from skinfit.io.paths import package_version
 from skinfit.io.references import cite_long
-from skinfit.plots.contrast_matrix import plot_contrast_matrix
 from skinfit.report.checks import (
     checked_text,
     comparison_issues,
@@ -42,7 +41,7 @@ from skinfit.report.checks import (
     section_issues,
 )
 from skinfit.report.design import design_section
-from skinfit.report.figures import draw_figure, fit_figure_jobs, render_figures
+from skinfit.report.figures import fit_figure_jobs, render_figures
 from skinfit.report.groups import (
     CONTRAST_ROWS,
     across_fits,
@@ -190,7 +189,7 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
     The fits' figures are drawn while the sections, ``analyses`` and the figures across fits
     are computed (:func:`render_figures`' ``meanwhile``)."""
     figdir.mkdir(parents=True, exist_ok=True)
-    issues_all, sections, more = [], [], []
+    issues_all, sections, more, contrast_tables = [], [], [], []
     per_model = {}
     for _, fit in items:
         per_model[fit.model_id] = per_model.get(fit.model_id, 0) + 1
@@ -251,6 +250,29 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             # drawn from the table alone: kept in the folder while the table is the same
             more.append({"fit": None, "inputs": hashlib.sha256(table.to_csv().encode()).hexdigest(),
                          "func": "plot_comparison", "args": (table,), "path": path, "comparison": entry})
+        for name, table in (given["contrasts"] or {}).items():
+            stem = unique_name("contrasts_" + file_part(name).strip("_"), stems)
+            full = contrast_section(table)
+            full.to_csv(out / f"{stem}.csv", index=False)
+            top = contrast_display(full.head(CONTRAST_ROWS))
+            entry = {"name": name, "csv": f"{stem}.csv", "n": len(full), "shown": len(top), "figures": [],
+                     "ci": interval_name(table.attrs.get("ci_prob", ci_prob)), "rope": table.attrs.get("rope"),
+                     "sentence": contrast_sentence(full), "id": f"contrasts-{len(contrast_tables) + 1}",
+                     "issues": contrast_issues(table), "table": cells(top, "A")}
+            contrast_tables.append(entry)
+            order = list(dict.fromkeys([*table["A"], *table["B"]]))  # subjects or levels as the table lists them
+            for pname, rows in (full.groupby("parameter", sort=False) if "parameter" in full.columns else ()):
+                if len(set(rows["A"]) | set(rows["B"])) < MATRIX_LABELS:  # a few pairs: the table says it all
+                    continue
+                path = figdir / f"{stem}_{file_part(str(pname))}.png"
+                entry["figures"].append({"file": f"figures/{path.name}", "alt": f"matrix of the contrasts of {pname}",
+                                         "caption": f"{pname}: the effect of each row's subject against each "
+                                                    f"column's ({len(rows)} pairs); dots: probability of direction "
+                                                    "above 0.95"})
+                # drawn from the pairs' rows alone: kept in the folder while they are the same
+                more.append({"fit": None, "inputs": hashlib.sha256(rows.to_csv().encode()).hexdigest(),
+                             "func": "plot_contrast_matrix", "args": (rows, pname), "kwargs": {"order": order},
+                             "path": path, "contrast": entry, "entry": entry["figures"][-1]})
         return more
 
     for _, fit in items:  # its checks of the fit to the data need the deferred groups, its figures' keys
@@ -258,7 +280,6 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             fit.complete()
     jobs = [job for section_jobs in fit_jobs for job in section_jobs]
     errors = render_figures([fit for _, fit in items], jobs, figdir, meanwhile=meanwhile)
-    contrasts = given["contrasts"]
     for job, error in zip(jobs + more, errors):
         if not error:
             continue
@@ -266,6 +287,10 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             job["comparison"]["figure"] = None
             issues_all.append({"status": "WARN", "anchor": job["comparison"]["id"], "where": "model comparison",
                                "text": error})
+        elif "contrast" in job:  # listed at the top, the figure left out (its table stays)
+            job["contrast"]["figures"].remove(job["entry"])
+            issues_all.append({"status": "WARN", "anchor": job["contrast"]["id"],
+                               "where": f"contrasts: {job['contrast']['name']}", "text": error})
         elif "across" in job:  # listed at the top, the figure left out
             job["across"]["figures"].remove(job["entry"])
             issues_all.append({"status": "WARN", "anchor": job["across"]["id"],
@@ -275,34 +300,6 @@ def _write_contents(items, out, figdir, *, title, comparison, population, popula
             section["figures"].remove(job["entry"])
             section["issues"].append(("WARN", error))
             issues_all.append({"status": "WARN", "anchor": section["key"], "where": section["where"], "text": error})
-    contrast_tables = []
-    for name, table in (contrasts or {}).items():
-        stem = unique_name("contrasts_" + file_part(name).strip("_"), stems)
-        full = contrast_section(table)
-        full.to_csv(out / f"{stem}.csv", index=False)
-        top = contrast_display(full.head(CONTRAST_ROWS))
-        figures = []
-        order = list(dict.fromkeys([*table["A"], *table["B"]]))  # subjects or levels as the table lists them
-        for pname, rows in (full.groupby("parameter", sort=False) if "parameter" in full.columns else ()):
-            if len(set(rows["A"]) | set(rows["B"])) < MATRIX_LABELS:  # a few pairs: the table says it all
-                continue
-            path = figdir / f"{stem}_{file_part(str(pname))}.png"
-            error = draw_figure(lambda rows=rows, pname=pname, order=order:
-                                plot_contrast_matrix(rows, pname, order=order), path)
-            if error:
-                issues_all.append({"status": "WARN", "anchor": f"contrasts-{len(contrast_tables) + 1}",
-                                   "where": f"contrasts: {name}", "text": error})
-            else:
-                figures.append({"file": f"figures/{path.name}", "alt": f"matrix of the contrasts of {pname}",
-                                "caption": f"{pname}: the effect of each row's subject against each column's "
-                                           f"({len(rows)} pairs); dots: probability of direction above 0.95"})
-        contrast_tables.append({"name": name, "csv": f"{stem}.csv", "n": len(full), "shown": len(top),
-                                "figures": figures,
-                                "ci": interval_name(table.attrs.get("ci_prob", ci_prob)),
-                                "rope": table.attrs.get("rope"), "sentence": contrast_sentence(full),
-                                "id": f"contrasts-{len(contrast_tables) + 1}", "issues": contrast_issues(table),
-                                "table": cells(top, "A")})
-
     design_sections = []
     if designs:  # skinfit design results (DesignResult): the next experiment's plan, its figure in figures/
         design_sections = [{**design_section(d, figdir), "issues": design_issues(d)} for d in designs]
