@@ -126,6 +126,8 @@ def test_the_tick_check_sees_scientific_notation_and_offsets():
 def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_path):
     fit = fits(model, dataset)
     units = plots.parameter_units(fit)
+    display = {p["name"]: p["display_unit"] for p in tomllib.loads(fit.attrs["model_card"])["parameters"]
+               if p.get("display_unit")}
     names = [s["name"] for s in fit.attr("slots")]
     expected = {n: f"{n} [{_unit(units[n.split('[')[0]])}]" for n in names}
     for name, func in [("pair", plots.plot_pair), ("trace", plots.plot_trace),
@@ -142,6 +144,11 @@ def test_inference_plots_label_parameters_with_units(model, dataset, fits, tmp_p
         missing = [w for w in wanted if w not in shown]
         assert not missing, f"{name}: no axis labelled {missing}"
         assert not unplain_ticks(fig), f"{name}: {unplain_ticks(fig)[:4]}"
+        # a parameter whose card names a display unit is shown in it, as the tables show it (kPa, µm, mm)
+        raw = {label.replace("_\n", "_").replace("\n", " ") for label in xlabels | ylabels}
+        in_display = [f"{n} [{pretty_unit(display[n])}]" for n in (list(expected)[:10] if name == "pair" else expected)
+                      if n in display]
+        assert all(w in raw for w in in_display), f"{name}: {[w for w in in_display if w not in raw]}"
     if model == "electroadhesion":
         assert "E_star [Pa]" in expected.values() and "alpha [-]" in expected.values()
     fig = plots.plot_rank(fit, tmp_path / "rank.png")

@@ -10,7 +10,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
 from skinfit.errors import InputError
-from skinfit.plots.reading import param_label, parameter_units
+from skinfit.plots.reading import display_units, param_label, parameter_units
 from skinfit.plots.style import (
     COLOURS,
     MAX_WIDTH,
@@ -29,8 +29,9 @@ __all__ = ["plot_forest"]
 
 
 def _forest_rows(items, parameter, ci_prob=CI_PROB):
-    """(label, mean, lo, hi) rows (the HDI at ``ci_prob``), the parameter's unit and the labels of
-    pooled fits (:func:`_pooled`) from fits and/or summary tables (a table holds that HDI's columns,
+    """(label, mean, lo, hi) rows (the HDI at ``ci_prob``), the parameter's unit, its card's
+    display unit (None when it names none or only tables are given) and the labels of pooled fits
+    (:func:`_pooled`) from fits and/or summary tables (a table holds that HDI's columns,
     :func:`~skinfit.results.intervals.interval_columns`)."""
     lower, upper = interval_columns(ci_prob)
     if isinstance(items, dict):
@@ -51,12 +52,13 @@ def _forest_rows(items, parameter, ci_prob=CI_PROB):
             else:
                 label = _selection(f.dataset_id) if len(datasets) > 1 else f.model_id
             pairs.append((label, f))
-    rows, unit, pooled = [], None, _pooled(pairs)
+    rows, unit, display, pooled = [], None, None, _pooled(pairs)
     pattern = re.compile(rf"^{re.escape(parameter)}(\[(.*)\])?$")
     for label, item in pairs:
         if not isinstance(item, pd.DataFrame):
             item = as_fit(item)
             unit = unit or parameter_units(item).get(parameter)
+            display = display or display_units(item).get(parameter)
             table = item.summary(ci_prob)
             post = item.group("posterior")
             dims = ([d for d in post[parameter].dims if d not in ("chain", "draw")]
@@ -76,7 +78,7 @@ def _forest_rows(items, parameter, ci_prob=CI_PROB):
             rows.append((text, float(table.loc[name, "mean"]), float(table.loc[name, lower]),
                          float(table.loc[name, upper])))
     pooled = {text for text, *_ in rows if text.split(" · ")[0] in pooled}
-    return rows, unit, pooled
+    return rows, unit, display, pooled
 
 
 def _population_interval(spec, ci_prob=CI_PROB):
@@ -146,10 +148,11 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
     pops = pops if isinstance(pops, dict) and set(pops) <= set(names) else {n: pops for n in names}
     panels = []
     for name in names:
-        rows, card_unit, pooled = _forest_rows(fits_or_tables, name, ci_prob)
+        rows, card_unit, display, pooled = _forest_rows(fits_or_tables, name, ci_prob)
         if not rows:
             raise InputError("plot_forest", f"no parameter {name!r} in the given fits or tables")
-        panels.append((name, rows, unit or card_unit, pooled, pops.get(name)))
+        # a unit given here is shown as given (with a prefix where needed); else the card's display unit
+        panels.append((name, rows, unit or card_unit, pooled, pops.get(name), None if unit else display))
     labels = list(dict.fromkeys(r[0] for _, rows, *_ in panels for r in rows))
     pooled_labels = [lab for lab in labels if any(lab in p[3] for p in panels)]
     subjects = [lab for lab in labels if lab not in pooled_labels]
@@ -159,8 +162,8 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
     fig = new_figure(6.4 if ncols == 1 else MAX_WIDTH, nrows * (0.3 * len(order) + 0.9) + 0.9)
     axes = np.atleast_1d(fig.subplots(nrows, ncols, sharey=True, squeeze=False)).ravel()
     y = {lab: len(order) - 1 - k for k, lab in enumerate(order)}
-    for ax, (name, rows, u, pooled, pop) in zip(axes, panels):
-        _forest_panel(ax, name, rows, u, pooled, pop, y, ci_prob)
+    for ax, (name, rows, u, pooled, pop, display) in zip(axes, panels):
+        _forest_panel(ax, name, rows, u, pooled, pop, y, ci_prob, display)
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     axes[0].set_yticks([y[lab] for lab in order], order)
@@ -183,15 +186,16 @@ def plot_forest(fits_or_tables, parameter, path=None, *, population=None, unit=N
     return finish_figure(fig, path)
 
 
-def _forest_panel(ax, name, rows, unit, pooled, population, y, ci_prob=CI_PROB):
+def _forest_panel(ax, name, rows, unit, pooled, population, y, ci_prob=CI_PROB, display=None):
     """One parameter's panel: a row per fit (``rows``: label, mean, lo, hi, SI values), the
     pooled fits apart, the population band and row when given; the x axis scaled to plain
-    numbers (:func:`~skinfit.plots.style.plain_scale`), its limits holding every interval with a margin."""
+    numbers (:func:`~skinfit.plots.style.plain_scale`: the card's ``display`` unit first), its
+    limits holding every interval with a margin."""
     values = np.array([v for r in rows for v in r[1:]], dtype=float)
     pop = _population_interval(population, ci_prob) if population is not None else None
     if pop is not None:
         values = np.concatenate([values, pop])
-    factor, shown = plain_scale(values, unit)
+    factor, shown = plain_scale(values, unit, display)
     for part, style in ((False, {"color": COLOURS[0], "marker": "o", "ms": 4}),
                         (True, {"color": "0.45", "marker": "s", "mfc": "white", "ms": 5})):
         chosen = [r for r in rows if (r[0] in pooled) == part]

@@ -42,7 +42,7 @@ def plot_pair(fit, path=None, *, var_names=None, max_draws=1500):
     if len(values) > max_draws:
         values = values[np.linspace(0, len(values) - 1, max_draws).astype(int)]
     # plain numbers on every axis: each parameter in its unit with an SI prefix or a power of ten
-    scales = [plain_scale(values[:, k], s["unit"]) for k, s in enumerate(slots)]
+    scales = [plain_scale(values[:, k], s["unit"], s["display"]) for k, s in enumerate(slots)]
     values = values / np.array([f for f, _ in scales])
     mapv = {s["name"]: fit.map[s["name"]] / f for s, (f, _) in zip(slots, scales)}
     d = len(slots)

@@ -46,7 +46,7 @@ def plot_prior_posterior(fit, path=None, *, var_names=None, ncols=4):
         v = slot_values(ds, s).ravel()
         prior = s["prior"]
         # the axis in plain numbers (an SI prefix or a power of ten in the unit): x = SI / factor
-        factor, unit = plain_scale(v, s["unit"])
+        factor, unit = plain_scale(v, s["unit"], s["display"])
         v = v / factor
         lo_q, hi_q = (prior.ppf(np.array([0.005, 0.995])) / factor if prior is not None
                       else np.quantile(v, [0, 1]))

@@ -19,6 +19,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter, NullLocator
 from PIL import Image
 
+from skinfit.io.units import to_si
+
 __all__ = ["COLOURS", "MAP_COLOUR", "DPI", "MAX_WIDTH", "MIN_FONT", "SAVE_RC", "ensure_backend", "new_figure",
            "suptitle", "wrap_title", "log_ticks", "save_figure", "finish_figure", "fix_layout",
            "write_figure_files", "plain_scale", "tick_text"]
@@ -168,10 +170,14 @@ def write_figure_files(fig, path):
     save_figure(fig, path.with_suffix(".pdf"), format="pdf", metadata={"CreationDate": None})
 
 
-def plain_scale(values, unit):
-    """(factor, unit text) that put ``values`` (SI) in plain numbers: an SI prefix on a simple
-    unit (``Pa`` -> ``kPa``), else a power of ten written in the unit (``10⁻⁹ m^2/N^m``); values
-    are divided by the factor. (1, unit) where plain numbers already read well."""
+def plain_scale(values, unit, display=None):
+    """(factor, unit text) that put ``values`` (SI) in plain numbers: the model card's
+    ``display`` unit where it names one (kPa for a modulus, as the tables show it), else an SI
+    prefix on a simple unit (``Pa`` -> ``kPa``), else a power of ten written in the unit
+    (``10⁻⁹ m^2/N^m``); values are divided by the factor. (1, unit) where plain numbers already
+    read well."""
+    if display:
+        return to_si(display), display
     top = np.nanmax(np.abs(values)) if np.size(values) else 1.0
     if not np.isfinite(top) or top == 0 or 0.1 <= top < 10000:
         return 1.0, unit

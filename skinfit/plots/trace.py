@@ -34,7 +34,8 @@ def plot_trace(fit, path=None, *, var_names=None, n_groups=4, max_points=300, ma
     axes = fig.subplots(len(slots), 2, squeeze=False, width_ratios=[3, 1])
     for i, s in enumerate(slots):
         v = slot_values(ds, s)  # (walkers, draws)
-        factor, unit = plain_scale(v, s["unit"])  # plain numbers: an SI prefix or a power of ten in the unit
+        # plain numbers: the card's display unit, an SI prefix or a power of ten in the unit
+        factor, unit = plain_scale(v, s["unit"], s["display"])
         v = v / factor
         ax = axes[i, 0]
         step = max(1, v.shape[1] // max_points)  # the picture of a long chain, at a fraction of the ink
