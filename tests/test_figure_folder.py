@@ -133,3 +133,16 @@ def test_contrast_matrices_are_kept_while_their_pairs_are_the_same(ea_fit, drawn
     assert len(drawn) == first and matrix.stat().st_mtime_ns == stamp, "unchanged: nothing drawn again"
     write_report({"ea": ea_fit}, out, contrasts={"between subjects": table(shift=1.2)})
     assert len(drawn) == first + 1 and matrix.stat().st_mtime_ns != stamp, "other pairs: the matrix drawn again"
+
+
+def test_the_figure_and_cache_keys_cover_every_layer_of_the_source():
+    """A report's kept figures and the population cache are keyed by skinfit's source
+    (io.paths.code_hash): every layer's files are in it, the plots and the report included, so
+    that a changed plot or analysis never reuses what older code made (it once hashed io/ alone)."""
+    from skinfit.io.paths import source_files
+
+    root = Path(figures.__file__).parents[1]
+    folders = {p.relative_to(root).parts[0] for p in source_files() if len(p.relative_to(root).parts) > 1}
+    assert {"physics", "io", "inference", "results", "analysis", "plots", "report", "apps"} <= folders
+    names = {p.relative_to(root).as_posix() for p in source_files()}
+    assert {"posterior.py", "plots/pair.py", "report/templates/report.html.j2", "physics/electroadhesion.py"} <= names

@@ -202,15 +202,22 @@ def display(path: Path) -> str:
     return str(path)
 
 
+def source_files() -> list[Path]:
+    """Every .py, template and card file of the skinfit package (all its layers: the physics, the
+    sampler, the plots, the report), sorted."""
+    root = Path(__file__).parents[1]  # skinfit/, this module being skinfit/io/paths.py
+    return [path for path in sorted(root.rglob("*"))
+            if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts]
+
+
 @cache
 def source_hash() -> str:
-    """sha256 of skinfit's own source: every .py, template and card file of the package (the
-    physics, the sampler, the plots). Computed once a process."""
+    """sha256 of skinfit's own source (:func:`source_files`, with their paths in the package).
+    Computed once a process."""
     h = hashlib.sha256()
-    root = Path(__file__).parent
-    for path in sorted(root.rglob("*")):
-        if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts:
-            h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    root = Path(__file__).parents[1]
+    for path in source_files():
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
 
