@@ -677,6 +677,10 @@ def test_short_log_axis_labels_1_2_5_and_draws_no_minor_ticks_between():
     assert [dense.xaxis.get_major_formatter()(v) for v in major] == ["0.2", "0.5", "1", "2"]
     assert len(dense.xaxis.get_minorticklocs()) == 0
     assert len(_in_view(sparse.xaxis, sparse.xaxis.get_minorticklocs())) > 5
+    fig, (one,) = _log_axes(1, (0.02, 0.9))  # 1.65 decades holding one decade tick: 1, 2, 5 x 10^k too
+    style.log_ticks(one, "x")
+    fig.draw_without_rendering()
+    np.testing.assert_allclose(_in_view(one.xaxis, one.xaxis.get_majorticklocs()), [0.02, 0.05, 0.1, 0.2, 0.5])
 
 
 @pytest.mark.parametrize("name", ["ppc", "prior_posterior"])

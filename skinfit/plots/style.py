@@ -85,13 +85,14 @@ def wrap_title(text, ax, fontsize=MIN_FONT + 1):
 
 def log_ticks(ax, which="x", numticks=5, sparse=False):
     """Readable ticks on a log axis (call after its limits are set): decades, or 1, 2, 5 x 10^k
-    on a range of less than 1.5 decades (``sparse``: at most ``numticks`` evenly spaced values
-    away from the ends, for small panels), labelled as plain numbers. Minor ticks stay
-    unlabelled, and are left out between 1, 2, 5 x 10^k labels, where they add nothing to the
-    labels and the grid."""
+    on a range of less than 1.5 decades or holding fewer than two decades (``sparse``: at most
+    ``numticks`` evenly spaced values away from the ends, for small panels), labelled as plain
+    numbers. Minor ticks stay unlabelled, and are left out between 1, 2, 5 x 10^k labels, where
+    they add nothing to the labels and the grid."""
     axis = ax.xaxis if which == "x" else ax.yaxis
     lo, hi = ax.get_xlim() if which == "x" else ax.get_ylim()
-    short = math.log10(hi / lo) < 1.5
+    # 1, 2, 5 x 10^k also where fewer than two decades fall inside (0.02 .. 0.9 shows only 0.1)
+    short = math.log10(hi / lo) < 1.5 or math.floor(math.log10(hi)) - math.ceil(math.log10(lo)) < 1
     if short and sparse:
         axis.set_major_locator(MaxNLocator(numticks, prune="both"))
         axis.set_major_formatter(FuncFormatter(lambda v, _: tick_text(v)))
