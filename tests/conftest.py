@@ -1,4 +1,6 @@
+import ast
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,6 +92,20 @@ HEAVY = {
     ("test_errors_resources.py", "test_class6_full_tmpfs_gives_one_line_and_no_crash"),
     ("test_design.py", "test_skinfit_report_shows_a_design_folder_as_a_section"),
 }
+
+
+def pytest_configure(config):
+    """Every (file, test) named by MECHANICS_TESTS and HEAVY is a test function of that file: a
+    renamed or removed test would otherwise return to the default run unnoticed."""
+    here = Path(__file__).parent
+    missing = []
+    for file, name in sorted(MECHANICS_TESTS | HEAVY):
+        tree = ast.parse((here / file).read_text(encoding="utf-8")) if (here / file).is_file() else None
+        defined = {n.name for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)} if tree else set()
+        if name not in defined:
+            missing.append(f"{file}::{name}")
+    if missing:
+        raise pytest.UsageError(f"tests/conftest.py names tests that do not exist: {', '.join(missing)}")
 
 
 def pytest_collection_modifyitems(config, items):
