@@ -146,3 +146,17 @@ def test_the_figure_and_cache_keys_cover_every_layer_of_the_source():
     assert {"physics", "io", "inference", "results", "analysis", "plots", "report", "apps"} <= folders
     names = {p.relative_to(root).as_posix() for p in source_files()}
     assert {"posterior.py", "plots/pair.py", "report/templates/report.html.j2", "physics/electroadhesion.py"} <= names
+
+
+def test_a_changed_plot_module_changes_the_source_hash(monkeypatch):
+    """One byte more in skinfit/plots/pair.py, as read by the hash, gives another source hash:
+    the figures it drew are not kept for the changed code."""
+    from skinfit.io import paths
+
+    before = paths.source_hash.__wrapped__()
+    pair = Path(figures.__file__).parents[1] / "plots" / "pair.py"
+    read = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda self: read(self) + (b"#" if self == pair else b""))
+    assert paths.source_hash.__wrapped__() != before
+    monkeypatch.undo()
+    assert paths.source_hash.__wrapped__() == before  # the same files, the same hash

@@ -17,9 +17,10 @@ import pytest
 import skinfit
 from skinfit import plots
 from skinfit.apps.cli import main
+from skinfit.io.labels import display_unit_map
 from skinfit.io.units import pretty_unit, to_si
 from skinfit.report import html as report
-from skinfit.report.tables import break_at_underscores, display_unit_map
+from skinfit.report.tables import break_at_underscores
 
 
 class _Page(HTMLParser):

@@ -9,7 +9,7 @@ import tomllib
 from skinfit.io.units import si_unit, to_si
 
 __all__ = ["variable_attrs", "annotate", "noise_suffix", "noise_parameter_names", "level_labels", "parameter_units",
-           "derived_units", "sd_resolution", "round_to_sd"]
+           "display_unit_map", "derived_units", "sd_resolution", "round_to_sd"]
 
 
 def noise_suffix(observables, obs):
@@ -70,6 +70,14 @@ def parameter_units(fit):
         units[f"sigma{suffix}"] = "1" if setup["noise"].get(o) == "lognormal" else obs_units.get(o, "1")
         units[f"nu{suffix}"] = "1"
     return units
+
+
+def display_unit_map(fit):
+    """Parameter name -> the unit its model card asks tables and figures to show it in
+    (``display_unit``: kPa for a modulus, µm for a gap), for the parameters that name one, from
+    a fit's root attribute ``model_card``."""
+    card = tomllib.loads(fit.attrs["model_card"])
+    return {p["name"]: p["display_unit"] for p in card.get("parameters", []) if p.get("display_unit")}
 
 
 def variable_attrs(post):

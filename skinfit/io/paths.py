@@ -202,11 +202,14 @@ def display(path: Path) -> str:
     return str(path)
 
 
+#: The skinfit package folder (this module is skinfit/io/paths.py)
+_PACKAGE = Path(__file__).parents[1]
+
+
 def source_files() -> list[Path]:
     """Every .py, template and card file of the skinfit package (all its layers: the physics, the
     sampler, the plots, the report), sorted."""
-    root = Path(__file__).parents[1]  # skinfit/, this module being skinfit/io/paths.py
-    return [path for path in sorted(root.rglob("*"))
+    return [path for path in sorted(_PACKAGE.rglob("*"))
             if path.suffix in (".py", ".j2", ".toml") and path.is_file() and "__pycache__" not in path.parts]
 
 
@@ -215,9 +218,8 @@ def source_hash() -> str:
     """sha256 of skinfit's own source (:func:`source_files`, with their paths in the package).
     Computed once a process."""
     h = hashlib.sha256()
-    root = Path(__file__).parents[1]
     for path in source_files():
-        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        h.update(path.relative_to(_PACKAGE).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
 
 

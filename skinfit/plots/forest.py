@@ -10,7 +10,8 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
 from skinfit.errors import InputError
-from skinfit.plots.reading import display_units, param_label, parameter_units
+from skinfit.io.labels import display_unit_map
+from skinfit.plots.reading import param_label, parameter_units
 from skinfit.plots.style import (
     COLOURS,
     MAX_WIDTH,
@@ -58,7 +59,7 @@ def _forest_rows(items, parameter, ci_prob=CI_PROB):
         if not isinstance(item, pd.DataFrame):
             item = as_fit(item)
             unit = unit or parameter_units(item).get(parameter)
-            display = display or display_units(item).get(parameter)
+            display = display or display_unit_map(item).get(parameter)
             table = item.summary(ci_prob)
             post = item.group("posterior")
             dims = ([d for d in post[parameter].dims if d not in ("chain", "draw")]

@@ -6,12 +6,13 @@ import tomllib
 
 import numpy as np
 
+from skinfit.io.labels import display_unit_map
 from skinfit.io.labels import parameter_units as card_parameter_units
 from skinfit.io.priors import parse_prior
 from skinfit.io.units import pretty_unit, to_si, unit_mathtext
 from skinfit.results.fit import as_fit
 
-__all__ = ["model_card", "data_units", "unit_factor", "axis_label", "param_label", "display_units",
+__all__ = ["model_card", "data_units", "unit_factor", "axis_label", "param_label",
            "parameter_units", "saved_priors", "sampled_slots", "use_log", "slot_values"]
 
 
@@ -62,12 +63,6 @@ def param_label(name, unit):
     return name if unit is None else f"{name} [{_unit_text(unit)}]"
 
 
-def display_units(fit):
-    """Parameter name -> the unit its model card asks figures and tables to show it in
-    (``display_unit``: kPa for a modulus, µm for a gap), for the parameters that name one."""
-    return {p["name"]: p["display_unit"] for p in model_card(fit).get("parameters", []) if p.get("display_unit")}
-
-
 def parameter_units(fit):
     """Parameter (or noise parameter) name -> SI unit as stated in the model card."""
     return card_parameter_units(as_fit(fit))
@@ -86,7 +81,7 @@ def sampled_slots(fit, densities=False):
     bounded below by 0) and, for a plot of the priors' ``densities``, the prior, checked against
     scipy.stats; the other plots read the bounds alone and do not import scipy.stats."""
     priors = saved_priors(fit, check_mass=densities)
-    units, display = parameter_units(fit), display_units(fit)
+    units, display = parameter_units(fit), display_unit_map(fit)
     out = []
     for s in fit.attr("slots"):
         prior = priors.get(s["base"])

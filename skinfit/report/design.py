@@ -7,9 +7,8 @@ from pathlib import Path
 from skinfit.errors import InputError
 from skinfit.io.labels import round_to_sd
 from skinfit.io.models import load_model
-from skinfit.io.units import to_si
 from skinfit.plots.design import plot_eig
-from skinfit.report.tables import base_name, cells, unit_cell
+from skinfit.report.tables import cells, shown_unit, unit_or_dash
 
 __all__ = ["design_section"]
 
@@ -35,13 +34,8 @@ def _sd_table(result):
     sds = ["now", "plan", "baseline"]
     units = []
     for name, coordinate in zip(table.index, table["coordinate"]):
-        factor, unit = 1.0, "- (sd of ln)"
-        if coordinate != "log":
-            shown = display.get(base_name(str(name)))
-            factor = to_si(shown) if shown else 1.0
-            unit = shown or si_units.get(base_name(str(name)), "")
-            unit = unit_cell(unit) if unit not in ("", "1", "-") else "-"
-        units.append(unit)
+        factor, unit = (1.0, "- (sd of ln)") if coordinate == "log" else shown_unit(name, display, si_units)
+        units.append(unit if coordinate == "log" else unit_or_dash(unit))
         for c in sds:
             value = float(result.sd.loc[name, c]) / factor
             table.loc[name, c] = round_to_sd(value, value)

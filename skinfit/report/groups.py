@@ -25,12 +25,11 @@ from skinfit.analysis.population.inputs import subject_digest
 from skinfit.analysis.population.population import population as fit_population
 from skinfit.analysis.population.result import DERIVED
 from skinfit.errors import InputError
-from skinfit.io.labels import parameter_units
+from skinfit.io.labels import display_unit_map, parameter_units
 from skinfit.report.checks import NOT_CONVERGED_ATTR, population_issues
 from skinfit.report.tables import (
     base_name,
     cells,
-    display_unit_map,
     effect_units,
     file_part,
     in_display_unit,

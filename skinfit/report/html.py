@@ -384,6 +384,12 @@ def _record_outputs(out, before, start):
     (out / REPORT_MARKER).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
 
 
+def _unit_suffix(tb):
+    """`` [unit]`` after a table's heading, as the page's ``unit_suffix`` macro writes it; empty
+    for a table without a unit or of a dimensionless parameter."""
+    return f" [{tb['unit']}]" if tb.get("unit") not in (None, "", "1") else ""
+
+
 def _summary_md(ctx):
     lines = [f"# {ctx['title']}", "",
              f"Written by skinfit {ctx['version']} from {ctx['n_fits']} saved fit(s); "
@@ -407,15 +413,14 @@ def _summary_md(ctx):
     for a in ctx["across"]:
         lines += ["", f"## {a['model_id']} across fits: {', '.join(a['fits'])}", ""]
         for tb in a["tables"]:
-            unit = f" [{tb['unit']}]" if tb.get("unit") not in (None, "", "1") else ""
-            lines += ["", f"### {tb['parameter']} per subject{unit}", "", markdown(tb["table"])]
+            lines += ["", f"### {tb['parameter']} per subject{_unit_suffix(tb)}", "", markdown(tb["table"])]
         if a["population"]:
             lines += ["", "### Population", "", markdown(a["population"]["hyper"])]
             if a["population"]["effects"]:
                 lines += ["", "#### Conditions as effects", "", markdown(a["population"]["effects"])]
             for tb in a["population"]["subjects"]:
-                unit = f" [{tb['unit']}]" if tb.get("unit") not in (None, "", "1") else ""
-                lines += ["", f"#### {tb['parameter']}{unit}: separate and shrunk", "", markdown(tb["table"])]
+                lines += ["", f"#### {tb['parameter']}{_unit_suffix(tb)}: separate and shrunk", "",
+                          markdown(tb["table"])]
         lines += [f"![{f['alt']}]({f['file']})" for f in a["figures"]]
     for c in ctx["contrasts"]:
         lines += ["", f"## Contrasts: {c['name']}", "", c["sentence"], ""]

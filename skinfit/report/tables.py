@@ -6,17 +6,17 @@ the HTML page and in ``summary.md`` (:func:`markdown`); its CSV is written by pa
 
 import math
 import re
-import tomllib
 
 import numpy as np
 import pandas as pd
 from markupsafe import Markup, escape
 
+from skinfit.io.labels import display_unit_map
 from skinfit.io.units import pretty_unit, to_si
 from skinfit.results.summary import format_numbers, is_estimate_column
 
 __all__ = ["file_part", "unique_name", "cell_text", "cells", "not_applicable", "markdown", "level_names",
-           "base_name", "defang", "break_at_underscores", "ranking_note", "display_unit_map", "display_units",
+           "base_name", "defang", "break_at_underscores", "ranking_note", "display_units", "shown_unit", "unit_or_dash",
            "unit_cell", "population_units", "effect_units", "in_display_unit"]
 
 
@@ -154,17 +154,24 @@ def ranking_note(table):
             "check the standard errors before reading either difference.")
 
 
-def display_unit_map(fit):
-    """Parameter name -> the unit its model card asks tables and figures to show it in
-    (``display_unit``: kPa for a modulus, µm for a gap), for the parameters that name one."""
-    card = tomllib.loads(fit.attrs["model_card"])
-    return {p["name"]: p["display_unit"] for p in card.get("parameters", []) if p.get("display_unit")}
-
-
 def unit_cell(unit):
     """A unit as a table cell: as a physicist writes it (``N·s/m``, ``m²/N<sup>m</sup>``),
     markup for the page (:func:`skinfit.io.units.pretty_unit`)."""
     return Markup(pretty_unit(unit, html=True)) if isinstance(unit, str) and unit else unit
+
+
+def shown_unit(parameter, display, si_units):
+    """(factor, unit): the unit a parameter's values are shown in (``parameter`` a summary row's
+    name, ``gamma[0.5]`` read as ``gamma``), the card's display unit where ``display`` names one,
+    else its SI unit from ``si_units`` ('' when unknown), and the factor SI values are divided by."""
+    base = base_name(str(parameter))
+    shown = display.get(base)
+    return (to_si(shown), shown) if shown else (1.0, si_units.get(base, ""))
+
+
+def unit_or_dash(unit):
+    """A unit cell (:func:`unit_cell`), ``-`` for a dimensionless or unknown unit."""
+    return "-" if unit in ("", "1", "-") else unit_cell(unit)
 
 
 def display_units(shown, fit):
@@ -173,14 +180,13 @@ def display_units(shown, fit):
     for display only: the CSV stays in SI), and every unit written by :func:`unit_cell`."""
     display = display_unit_map(fit)
     out = shown.copy()
-    scaled = [c for c in out.columns if c == "sd" or is_estimate_column(c)]
-    out[scaled] = out[scaled].astype(float)
+    scaled = [out.columns.get_loc(c) for c in out.columns if c == "sd" or is_estimate_column(c)]
+    out.iloc[:, scaled] = out.iloc[:, scaled].astype(float)
     units = list(out["unit"])
     for i, name in enumerate(out.index):
-        unit = display.get(base_name(str(name)))
-        if unit:
-            for c in scaled:
-                out.iloc[i, out.columns.get_loc(c)] /= to_si(unit)
+        factor, unit = shown_unit(name, display, {})
+        if unit:  # the card names a display unit: else the row keeps its own unit
+            out.iloc[i, scaled] = out.iloc[i, scaled] / factor
             units[i] = unit
     out["unit"] = [unit_cell(u) for u in units]
     return out
@@ -199,22 +205,19 @@ def population_units(hyper, display, si_units):
     for c in ("estimate", "lower", "upper", "sd"):
         out[c] = out[c].astype(float)
     units = []
+    ends = [out.columns.get_loc(c) for c in ("estimate", "lower", "upper")]
+    sd = out.columns.get_loc("sd")
     for i, (name, row) in enumerate(zip(out.index, out.itertuples(index=False))):
-        shown = display.get(str(name))
-        unit = shown or si_units.get(str(name), "")
+        factor, unit = shown_unit(name, display, si_units)
         dimensionless = unit in ("", "1", "-")
         if row.quantity == "corr" or (row.coordinate == "log" and (row.quantity == "tau" or dimensionless)):
             units.append("-")
         elif row.coordinate == "log":
-            if shown:
-                for c in ("estimate", "lower", "upper"):
-                    out.iloc[i, out.columns.get_loc(c)] -= math.log(to_si(shown))
+            out.iloc[i, ends] = out.iloc[i, ends] - math.log(factor)
             units.append(Markup("ln(") + unit_cell(unit) + Markup(")"))
         else:
-            if shown:
-                for c in ("estimate", "lower", "upper", "sd"):
-                    out.iloc[i, out.columns.get_loc(c)] /= to_si(shown)
-            units.append("-" if dimensionless else unit_cell(unit))
+            out.iloc[i, [*ends, sd]] = out.iloc[i, [*ends, sd]] / factor
+            units.append(unit_or_dash(unit))
     out.insert(list(out.columns).index("quantity") + 1, "unit", units)
     return out
 
@@ -223,11 +226,9 @@ def in_display_unit(table, parameter, display, si_units):
     """(table, unit cell): a table of one parameter's values in SI (estimate and interval
     columns, ``sd``) converted to the card's ``display_unit`` where it names one, for display
     (the CSV stays in SI), and the unit its values are now in."""
-    unit = display.get(base_name(parameter))
-    if unit is not None:
-        table = table.assign(**{c: table[c] / to_si(unit) for c in table.columns
-                                if c == "sd" or is_estimate_column(c)})
-    return table, unit_cell(unit or si_units.get(base_name(parameter), ""))
+    factor, unit = shown_unit(parameter, display, si_units)
+    table = table.assign(**{c: table[c] / factor for c in table.columns if c == "sd" or is_estimate_column(c)})
+    return table, unit_cell(unit)
 
 
 def effect_units(effects, display, si_units):
@@ -239,14 +240,11 @@ def effect_units(effects, display, si_units):
     values = [out.columns.get_loc(c) for c in out.columns if c == "sd" or is_estimate_column(c)]
     units = []
     for i, (parameter, question) in enumerate(zip(out["parameter"], out["question"])):
-        base = base_name(str(parameter).split(" vs ")[0])
-        unit = display.get(base)
         if question == "ratio of medians":
             units.append("-")
             continue
-        if unit is not None:
-            out.iloc[i, values] = out.iloc[i, values].astype(float) / to_si(unit)
-        unit = unit or si_units.get(base, "")
-        units.append("-" if unit in ("", "1", "-") else unit_cell(unit))
+        factor, unit = shown_unit(str(parameter).split(" vs ")[0], display, si_units)
+        out.iloc[i, values] = out.iloc[i, values].astype(float) / factor
+        units.append(unit_or_dash(unit))
     out.insert(list(out.columns).index("question") + 1, "unit", units)
     return out
